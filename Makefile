@@ -1,0 +1,52 @@
+# kesbrdf — one-command setup, demo, tests and benchmarks on a fresh machine.
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+PIP := $(VENV)/bin/pip
+OUT ?= out/demo
+LLVM := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libLLVM-19.so /usr/lib/aarch64-linux-gnu/libLLVM-19.so))
+export DRJIT_LIBLLVM_PATH ?= $(LLVM)
+export MPLBACKEND ?= Agg
+
+.PHONY: all demo test test-py test-web bench system venv viewer clean
+
+all: test
+
+system:
+	bash scripts/setup-system.sh
+
+$(VENV)/.installed: pyproject.toml
+	python3 -m venv $(VENV)
+	$(PIP) install -q --upgrade pip
+	$(PIP) install -q -e '.[all]'
+	touch $@
+
+venv: system $(VENV)/.installed
+
+viewer/node_modules/.installed: viewer/package.json
+	cd viewer && npm ci --no-audit --no-fund --loglevel=error
+	touch $@
+
+viewer: viewer/node_modules/.installed
+
+demo: venv
+	$(VENV)/bin/kesbrdf demo -o $(OUT)
+
+test: venv
+	$(PY) -m pytest -q
+	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
+
+test-web: venv viewer
+	cd viewer && npm run build -- --outDir ../build/viewer-check >/dev/null && \
+	  diff -r ../build/viewer-check ../src/kesbrdf/viewer/static >/dev/null || \
+	  { echo "viewer bundle in src/kesbrdf/viewer/static is stale: run 'make viewer-bundle'"; exit 1; }
+	cd viewer && KESBRDF_PYTHON=../$(PY) npm test
+
+viewer-bundle: viewer
+	cd viewer && npm run build -- --outDir ../src/kesbrdf/viewer/static --emptyOutDir
+
+bench: venv
+	$(PY) benchmarks/run.py --output benchmarks/results.json
+
+clean:
+	rm -rf out build .pytest_cache

@@ -1,0 +1,104 @@
+"""The ``kesbrdf`` command line.
+
+Each command lives in its own module ``kesbrdf.cli.<name>`` exposing
+
+* ``HELP``: one line for the command list,
+* ``add_arguments(parser)``: declare its flags,
+* ``run(args) -> int``: parse nothing more, call one library function, report.
+
+User errors (:class:`kesbrdf.errors.KesbrdfError`, missing files, missing optional
+dependencies) are printed on one line to stderr and give exit code 2; no traceback.
+Set ``KESBRDF_DEBUG=1`` to see tracebacks.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+
+from kesbrdf._version import __version__
+from kesbrdf.errors import KesbrdfError
+
+#: Command name -> module name under kesbrdf.cli.  Order is the order of ``--help``.
+COMMANDS: dict[str, str] = {
+    "simulate": "simulate",
+    "ingest": "ingest",
+    "fit": "fit",
+    "eval": "eval_",
+    "validate": "validate",
+    "plot": "plot",
+    "report": "report",
+    "render": "render",
+    "drape": "drape",
+    "colourways": "colourways",
+    "view": "view",
+    "demo": "demo",
+}
+
+EXIT_USER_ERROR = 2
+
+
+def _load(name: str):
+    try:
+        return importlib.import_module(f"kesbrdf.cli.{COMMANDS[name]}")
+    except ModuleNotFoundError as exc:
+        if exc.name and exc.name.startswith("kesbrdf.cli."):
+            return None
+        raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="kesbrdf",
+        description="Anisotropic fabric BRDFs from four-orientation gonio measurements "
+        "(extended KES).",
+    )
+    parser.add_argument("--version", action="version", version=f"kesbrdf {__version__}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in COMMANDS:
+        module = _load(name)
+        if module is None:
+            continue
+        p = sub.add_parser(name, help=module.HELP, description=module.HELP)
+        module.add_arguments(p)
+        p.set_defaults(_run=module.run)
+    return parser
+
+
+def error(message: str) -> None:
+    """Print a one-line user error to stderr."""
+    text = " ".join(str(message).split())
+    print(f"kesbrdf: error: {text}", file=sys.stderr)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "_run", None):
+        parser.print_help()
+        return EXIT_USER_ERROR
+    debug = os.environ.get("KESBRDF_DEBUG") == "1"
+    try:
+        return int(args._run(args) or 0)
+    except (KesbrdfError, FileNotFoundError, IsADirectoryError, PermissionError) as exc:
+        if debug:
+            raise
+        if isinstance(exc, OSError) and exc.filename:
+            error(f"{exc.filename}: {exc.strerror}")
+        else:
+            error(str(exc))
+        return EXIT_USER_ERROR
+    except ImportError as exc:
+        if debug:
+            raise
+        error(str(exc))
+        return EXIT_USER_ERROR
+    except KeyboardInterrupt:
+        error("interrupted; finished outputs were kept, partial ones removed")
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
