@@ -137,12 +137,14 @@ def _incidence_line(m: Measurement, rows: np.ndarray) -> float:
     """The θ_i + θ_r line (radians) the KES table is built from.
 
     The paper's protocol keeps θ_i + θ_r = 90°.  Denser data sets (several θ_i per
-    γ) are reduced to the line with the most samples (ties: closest to 90°); the
-    choice is recorded and the other samples stay available for validation.
+    γ) are reduced to the line closest to 90° among those with at least half the
+    samples of the most populated line; the choice is recorded and the other samples
+    stay available for validation.
     """
     total = np.round(np.degrees(m.theta_i[rows] + m.theta_r[rows]), 6)
     values, counts = np.unique(total, return_counts=True)
-    best = values[np.lexsort((np.abs(values - 90.0), -counts))[0]]
+    candidates = values[counts >= 0.5 * counts.max()]
+    best = candidates[np.argmin(np.abs(candidates - 90.0))]
     return float(np.radians(best))
 
 
@@ -289,6 +291,7 @@ def fit(
     lobe = table - body_q
     clamped = int(np.count_nonzero(lobe < -1e-12 * np.abs(table)))
     table = np.maximum(lobe, 0.0)
+    q_total_nodes = q_half_nodes
     q_half_nodes = q_half_nodes - c[None, None, :] * _line_weight(gamma_nodes, line_sum)[:, None, None]
 
     diagnostics = {
@@ -301,7 +304,7 @@ def fit(
         "gamma0_peaks": _gamma0_peaks(q_half_nodes, gamma_nodes, slots, m.channels),
     }
     if orientations == 4:
-        diagnostics["residual_135"] = _residual_135(q_half_nodes, m.channels)
+        diagnostics["residual_135"] = _residual_135(q_total_nodes, m.channels)
     return Model(
         channels=tuple(m.channels),
         phi_grid=phi_grid,
@@ -409,7 +412,10 @@ def _gamma0_peaks(q_nodes, gamma_nodes, slots, channels):
 
 
 def _residual_135(q_nodes, channels):
-    """How far the measured 135° is from the 3-orientation prediction (= 45°)."""
+    """How far the measured 135° is from the 3-orientation prediction (= 45°).
+
+    Computed on the measured q (body included, floored), relative to the 45° value.
+    """
     q45 = q_nodes[:, [1, 5], :]
     q135 = q_nodes[:, [3, 7], :]
     rel = (q135 - q45) / np.maximum(np.abs(q45), np.finfo(float).tiny)

@@ -1,0 +1,189 @@
+"""Compare models with measurements and references (paper STEP 4).
+
+Metrics are per channel; baselines (nearest measured orientation, linear
+interpolation over φ) are models built from the same samples with another φ
+interpolation (``kesbrdf.model.fit(interpolation=...)``), so the value of KES is
+measured, not assumed.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kesbrdf.brdf import evaluate
+from kesbrdf.geometry import spherical_to_cartesian
+from kesbrdf.gonio import measure
+from kesbrdf.measurement import Measurement
+from kesbrdf.model import fit
+
+__all__ = [
+    "metrics",
+    "validate",
+    "leave_one_orientation_out",
+    "compare_reference",
+    "hemisphere_directions",
+    "HELD_OUT_DEG",
+    "HEMISPHERE_LIGHTS_DEG",
+    "LOG_EPS_REL",
+]
+
+#: log error uses ln((p + ε)/(t + ε)) with ε = LOG_EPS_REL × max|t|: values far
+#: below the peak (dark noise) do not dominate it.
+LOG_EPS_REL = 1e-3
+#: Orientations held out when comparing against a reference (between the measured ones).
+HELD_OUT_DEG = (15.0, 22.5, 30.0, 60.0, 67.5, 75.0, 105.0, 112.5, 120.0, 150.0, 157.5, 165.0)
+#: The paper's Fig. 6 lights: θ_i = π/6 with φ_i = π/2 and π/4.
+HEMISPHERE_LIGHTS_DEG = ((30.0, 90.0), (30.0, 45.0))
+
+
+def metrics(pred, truth, channels=None) -> dict:
+    """Error metrics per channel and over all channels.
+
+    Returns ``{channel: {n, rmse, nrmse, log_rmse, max_abs, mean_truth}, "all": {...}}``:
+    rmse in 1/sr; nrmse = rmse / mean|truth|; log_rmse = RMS of
+    ln((p + ε)/(t + ε)) (see :data:`LOG_EPS_REL`); max_abs = max |p − t|.
+    """
+    pred = np.asarray(pred, float).reshape(-1, np.shape(truth)[-1] if np.ndim(truth) > 1 else 1)
+    truth = np.asarray(truth, float).reshape(pred.shape)
+    if channels is None:
+        channels = [f"c{k}" for k in range(truth.shape[1])]
+    out = {}
+    for k, ch in enumerate(list(channels) + ["all"]):
+        p = pred.ravel() if ch == "all" else pred[:, k]
+        t = truth.ravel() if ch == "all" else truth[:, k]
+        err = p - t
+        eps = LOG_EPS_REL * max(float(np.max(np.abs(t))), np.finfo(float).tiny)
+        out[ch] = {
+            "n": int(t.size),
+            "rmse": float(np.sqrt(np.mean(err**2))),
+            "nrmse": float(np.sqrt(np.mean(err**2)) / max(float(np.mean(np.abs(t))), np.finfo(float).tiny)),
+            "log_rmse": float(np.sqrt(np.mean(np.log((np.maximum(p, 0) + eps) / (np.maximum(t, 0) + eps)) ** 2))),
+            "max_abs": float(np.max(np.abs(err))),
+            "mean_truth": float(np.mean(t)),
+        }
+    return out
+
+
+def validate(model, m: Measurement, mapping: str = "deviation") -> dict:
+    """Metrics of ``model`` against every sample of ``m``."""
+    pred = evaluate(model, m.wi, m.wr, mapping)
+    channels = list(m.channels)
+    if tuple(model.channels) != tuple(m.channels):
+        if model.n_channels == 1:
+            pred = np.repeat(pred, m.n_channels, axis=-1)
+        else:
+            from kesbrdf.errors import MeasurementError
+
+            raise MeasurementError(
+                f"model channels {list(model.channels)} do not match measurement channels {channels}"
+            )
+    return {"mapping": mapping, "n": len(m), "metrics": metrics(pred, m.values, channels)}
+
+
+def _mirror_135_to_45(m: Measurement, rows) -> Measurement:
+    """Rows at ψ = 135° seen in the mirror y → −y: ψ = 45° with θ_i, θ_r swapped."""
+    sub = m.subset(rows)
+    return Measurement.in_plane(
+        np.full(len(sub), np.radians(45.0)), sub.theta_r, sub.theta_i, sub.values,
+        channels=sub.channels, metadata=sub.metadata,
+    )
+
+
+def leave_one_orientation_out(m: Measurement, mapping: str = "deviation", **fit_kwargs) -> dict:
+    """Predict each measured orientation from the others, where KES can.
+
+    KES needs the warp and the weft, so only a bias can be left out: 45° is predicted
+    from 0°, 90° and 135° (eq. 1–2 with the other bias mirrored, i.e. assuming the
+    φ → π − φ symmetry), and 135° from 0°, 45°, 90°.  Warp and weft are reported as
+    not predictable.
+    """
+    psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
+    out = {}
+    for held in (0.0, 45.0, 90.0, 135.0):
+        rows = np.abs(psi_deg - held) < 0.5
+        if not rows.any():
+            continue
+        if held in (0.0, 90.0):
+            out[f"{held:g}"] = {"possible": False, "reason": "KES needs both warp (0) and weft (90)"}
+            continue
+        other = 135.0 if held == 45.0 else 45.0
+        keep = (np.abs(psi_deg - 0) < 0.5) | (np.abs(psi_deg - 90) < 0.5)
+        other_rows = np.abs(psi_deg - other) < 0.5
+        if not other_rows.any():
+            out[f"{held:g}"] = {"possible": False, "reason": f"needs {other:g} deg"}
+            continue
+        base = m.subset(keep)
+        bias = _mirror_135_to_45(m, other_rows) if held == 45.0 else m.subset(other_rows)
+        train = Measurement.in_plane(
+            np.concatenate([base.psi, bias.psi]),
+            np.concatenate([base.theta_i, bias.theta_i]),
+            np.concatenate([base.theta_r, bias.theta_r]),
+            np.concatenate([base.values, bias.values]),
+            channels=m.channels,
+        )
+        test = m.subset(rows)
+        model = fit(train, orientations=3, **fit_kwargs)
+        if held == 135.0:
+            pred = evaluate(model, test.wi, test.wr, mapping)
+        else:
+            # the model was built with the mirrored bias at 45°; mirror the test back
+            flip = np.array([1.0, -1.0, 1.0])
+            pred = evaluate(model, test.wr * flip, test.wi * flip, mapping)
+        out[f"{held:g}"] = {"possible": True, "metrics": metrics(pred, test.values, m.channels)}
+    return out
+
+
+def hemisphere_directions(step_deg: float = 2.5, theta_max_deg: float = 87.5):
+    """Viewing directions on a (θ_r, φ_r) grid over the hemisphere, shape (T, P, 3)."""
+    theta = np.radians(np.arange(0.0, theta_max_deg + 1e-9, step_deg))
+    phi = np.radians(np.arange(0.0, 360.0, step_deg))
+    T, P = np.meshgrid(theta, phi, indexing="ij")
+    return spherical_to_cartesian(T, P), np.degrees(theta), np.degrees(phi)
+
+
+def compare_reference(
+    m: Measurement,
+    reference,
+    held_out_deg=HELD_OUT_DEG,
+    lights_deg=HEMISPHERE_LIGHTS_DEG,
+    mapping: str = "deviation",
+    interpolations=("kes", "nearest", "linear"),
+    **fit_kwargs,
+) -> dict:
+    """Fit KES and the baselines from ``m``; compare each with ``reference``.
+
+    Cases: held-out in-plane orientations in the same protocol as ``m`` (paper line)
+    and the Fig. 6 hemispheres (light at θ_i = 30°, φ_i = 90° and 45°).
+
+    Returns ``{"cases": {case: {interp: metrics}}, "ratio_kes_to": {baseline: {case: rmse ratio}}}``.
+    """
+    protocol = "paper"
+    step = None
+    gen = m.metadata.get("generator")
+    if isinstance(gen, str) and '"protocol": "dense"' in gen:
+        protocol = "dense"
+    models = {name: fit(m, interpolation=name, **fit_kwargs) for name in interpolations}
+    cases = {}
+    held = measure(reference, protocol=protocol, step_deg=step, orientations_deg=held_out_deg)
+    cases["held_out_orientations"] = {
+        name: metrics(evaluate(mod, held.wi, held.wr, mapping), held.values, held.channels)
+        for name, mod in models.items()
+    }
+    wr, _, _ = hemisphere_directions()
+    wr = wr.reshape(-1, 3)
+    for theta_i, phi_i in lights_deg:
+        wi = spherical_to_cartesian(np.radians(theta_i), np.radians(phi_i))[None, :]
+        truth = np.asarray(reference(wi, wr))
+        cases[f"hemisphere_theta_i{theta_i:g}_phi_i{phi_i:g}"] = {
+            name: metrics(evaluate(mod, wi, wr, mapping), truth, held.channels) for name, mod in models.items()
+        }
+    ratios = {}
+    if "kes" in models:
+        for name in models:
+            if name == "kes":
+                continue
+            ratios[name] = {
+                case: res["kes"]["all"]["rmse"] / max(res[name]["all"]["rmse"], np.finfo(float).tiny)
+                for case, res in cases.items()
+            }
+    return {"mapping": mapping, "cases": cases, "ratio_kes_to": ratios}

@@ -1,0 +1,95 @@
+"""BRDF mappings: reciprocity, horizon, NaN, broadcasting, the paper's eq. 3–4."""
+
+import numpy as np
+import pytest
+
+from kesbrdf.brdf import MAPPINGS, evaluate, lookup, paper_phi_gamma, to_phi_gamma, validate_mapping
+from kesbrdf.errors import KesbrdfError
+from kesbrdf.geometry import in_plane_directions, spherical_to_cartesian
+from kesbrdf.gonio import measure
+from kesbrdf.model import fit
+
+#: Reciprocity by construction: (φ, γ) are computed from symmetric expressions, so only
+#: round-off separates f(i, r) and f(r, i).
+RECIPROCITY_RTOL = 1e-12
+
+
+@pytest.fixture(scope="module")
+def model():
+    from kesbrdf.references.ward import AnisotropicWard
+
+    return fit(measure(AnisotropicWard(0.1, 0.2, rho_d=[0.3, 0.2, 0.1], rho_s=0.1), noise=0.01, rng=1))
+
+
+@pytest.mark.parametrize("mapping", ["deviation", "halfvector"])
+def test_reciprocity(model, random_pairs, mapping):
+    wi, wr = random_pairs
+    np.testing.assert_allclose(evaluate(model, wi, wr, mapping), evaluate(model, wr, wi, mapping), rtol=RECIPROCITY_RTOL)
+
+
+def test_paper_mapping_is_not_reciprocal(model, random_pairs):
+    # documented property of eq. 3–4 as printed (DESIGN §4): do not "fix" it silently
+    wi, wr = random_pairs
+    a, b = evaluate(model, wi, wr, "paper"), evaluate(model, wr, wi, "paper")
+    assert np.max(np.abs(a - b) / np.abs(a)) > 0.1
+
+
+def test_paper_eq4_by_hand():
+    # θ_r = 60°, φ_r − φ_i = 90°: sin(β/2) = ½√(sin²(−90°) + cos²60°) = ½√1.25
+    phi, gamma, sin_beta = paper_phi_gamma(np.radians(30), np.radians(10), np.radians(60), np.radians(100))
+    beta = 2 * np.arcsin(0.5 * np.sqrt(1.25))
+    assert sin_beta == pytest.approx(np.sin(beta), rel=1e-12)
+    assert gamma == pytest.approx(np.radians(30), rel=1e-12)
+    assert phi == pytest.approx(np.mod(np.pi / 2 - np.radians(110), 2 * np.pi), rel=1e-12)
+
+
+def test_below_horizon_is_zero_and_nan_propagates(model):
+    up = spherical_to_cartesian(0.3, 0.2)
+    down = np.array([0.0, 0.6, -0.8])
+    for mapping in MAPPINGS:
+        assert np.all(evaluate(model, up, down, mapping) == 0)
+        assert np.all(evaluate(model, down, up, mapping) == 0)
+        assert np.all(np.isnan(evaluate(model, up, [np.nan, 0, 1], mapping)))
+
+
+def test_broadcasting(model, rng):
+    wi = spherical_to_cartesian(rng.uniform(0, 1.4, (4, 1)), rng.uniform(0, 6, (4, 1)))
+    wr = spherical_to_cartesian(rng.uniform(0, 1.4, (1, 5)), rng.uniform(0, 6, (1, 5)))
+    f = evaluate(model, wi, wr)
+    assert f.shape == (4, 5, 3)
+    np.testing.assert_allclose(f[2, 3], evaluate(model, wi[2, 0], wr[0, 3]), rtol=1e-14)
+
+
+def test_in_plane_mapping_conventions():
+    # ψ = 30°, γ > 0: deviation toward azimuth ψ; γ < 0: toward ψ + π (DESIGN §4)
+    wi, wr = in_plane_directions(np.radians(30), np.radians([20, 50]), np.radians([50, 20]))
+    for mapping in ("deviation", "halfvector"):
+        phi, gamma = to_phi_gamma(wi, wr, mapping)
+        np.testing.assert_allclose(np.degrees(phi), [30, 210], atol=1e-9)
+        np.testing.assert_allclose(np.degrees(gamma), [30, 30], atol=1e-9)
+
+
+def test_mirror_direction_uses_plane_of_incidence():
+    wi, wr = in_plane_directions(np.radians(60), np.radians(40), np.radians(40))
+    phi, gamma = to_phi_gamma(wi, wr, "deviation")
+    assert gamma == pytest.approx(0, abs=1e-12)
+    assert np.degrees(phi) == pytest.approx(60, abs=1e-9)
+
+
+def test_lookup_is_periodic_and_clamped(model):
+    a = lookup(model, 0.1, 0.2)
+    np.testing.assert_allclose(lookup(model, 0.1 + 2 * np.pi, 0.2), a, rtol=1e-12)
+    np.testing.assert_allclose(lookup(model, 0.1, 3.0), lookup(model, 0.1, model.gamma_max), rtol=1e-12)
+
+
+def test_unknown_mapping():
+    with pytest.raises(KesbrdfError, match="expected one of deviation, halfvector, paper"):
+        validate_mapping("ward")
+
+
+def test_energy_below_one_for_a_physical_reference(model):
+    from kesbrdf.diagnostics import diagnose
+
+    d = diagnose(model)
+    assert d["albedo"]["above_one"] == []
+    assert d["reciprocity_error"] < 1e-12
