@@ -1,0 +1,78 @@
+"""The CLI contract users and scripts rely on (real commands, real files)."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from kesbrdf.cli.main import main
+
+
+@pytest.fixture
+def fitted(tmp_path):
+    meas = tmp_path / "meas.csv"
+    model = tmp_path / "model.kes.json"
+    assert main(["simulate", "--reference", "ward", "-o", str(meas), "--noise", "0.01"]) == 0
+    assert main(["fit", str(meas), "-o", str(model)]) == 0
+    return meas, model
+
+
+def test_simulate_writes_paper_protocol(tmp_path):
+    out = tmp_path / "m.csv"
+    assert main(["simulate", "-o", str(out)]) == 0
+    lines = [l for l in out.read_text().splitlines() if not l.startswith("#")]
+    assert len(lines) == 1 + 116
+    assert "# simulated: true" in out.read_text()
+
+
+def test_eval_matches_library_and_inputs(tmp_path, fitted):
+    from kesbrdf.brdf import evaluate
+    from kesbrdf.geometry import spherical_to_cartesian
+    from kesbrdf.model import load
+
+    meas, model_path = fitted
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg\n60,180,30,0\n30,90,45,200\n")
+    out = tmp_path / "out.csv"
+    assert main(["eval", str(model_path), "--pairs", str(pairs), "-o", str(out), "--mapping", "halfvector"]) == 0
+    rows = list(csv.DictReader(out.open()))
+    assert list(rows[0]) == ["theta_i_deg", "phi_i_deg", "theta_r_deg", "phi_r_deg", "R", "G", "B"]
+    model = load(model_path)
+    wi = spherical_to_cartesian(np.radians(30), np.radians(90))
+    wr = spherical_to_cartesian(np.radians(45), np.radians(200))
+    expected = evaluate(model, wi, wr, "halfvector")
+    assert float(rows[1]["G"]) == pytest.approx(expected[1], rel=1e-15)
+
+
+def test_validate_prints_and_writes_json(tmp_path, fitted, capsys):
+    meas, model = fitted
+    js = tmp_path / "v.json"
+    assert main(["validate", str(model), str(meas), "--json", str(js)]) == 0
+    result = json.loads(js.read_text())
+    assert result["metrics"]["all"]["rmse"] < 1e-12  # the model reproduces its inputs
+    assert "rmse" in capsys.readouterr().out
+
+
+def test_eval_bad_pairs(tmp_path, fitted, capsys):
+    _, model = fitted
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("theta_i_deg,phi_i_deg,theta_r_deg\n1,2,3\n")
+    out = tmp_path / "o.csv"
+    assert main(["eval", str(model), "--pairs", str(pairs), "-o", str(out)]) == 2
+    assert "missing column(s) phi_r_deg" in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_missing_model_file(tmp_path, capsys):
+    assert main(["validate", str(tmp_path / "nope.json"), str(tmp_path / "x.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "nope.json" in err and "Traceback" not in err
+
+
+def test_demo_quick(tmp_path):
+    out = tmp_path / "demo"
+    assert main(["demo", "-o", str(out), "--quick"]) == 0
+    v = json.loads((out / "validation.json").read_text())
+    assert v["round_trip"]["metrics"]["all"]["rmse"] < 1e-9
+    assert (out / "model.kes.json").exists()
