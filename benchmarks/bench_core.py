@@ -1,0 +1,65 @@
+"""Core benchmarks: BRDF evaluations/s per mapping, fit times, KES vs baselines."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from kesbrdf.brdf import MAPPINGS, evaluate
+from kesbrdf.geometry import spherical_to_cartesian
+from kesbrdf.gonio import measure
+from kesbrdf.model import fit
+from kesbrdf.references.ward import AnisotropicWard
+from kesbrdf.validation import compare_reference
+
+#: References for the KES-vs-baselines ratio: a spread of lobe widths and
+#: anisotropies, not one material.
+REFERENCES = {
+    "ward_0.10_0.20": AnisotropicWard(0.10, 0.20, rho_d=[0.3, 0.2, 0.1], rho_s=0.1),
+    "ward_0.12_0.30": AnisotropicWard(0.12, 0.30, rho_d=[0.25, 0.2, 0.15], rho_s=0.15),
+    "ward_0.20_0.40": AnisotropicWard(0.20, 0.40, rho_d=0.2, rho_s=0.1),
+    "ward_satin_0.08_0.22": AnisotropicWard(0.08, 0.22, rho_d=0.02, rho_s=0.12),
+    "ward_narrow_0.05_0.10": AnisotropicWard(0.05, 0.10, rho_d=0.02, rho_s=0.1),
+}
+
+
+def _best_of(fn, repeat=5):
+    best = np.inf
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def run() -> dict:
+    rng = np.random.default_rng(0)
+    ref = REFERENCES["ward_0.10_0.20"]
+    m = measure(ref, noise=0.01, rng=1)
+    model = fit(m)
+    n = 200_000
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    out = {}
+    for mapping in MAPPINGS:
+        t = _best_of(lambda: evaluate(model, wi, wr, mapping), 3)
+        out[f"brdf_evals_per_s_{mapping}"] = n / t
+    t_ref = _best_of(lambda: ref(wi, wr), 3)
+    out["brdf_evals_per_s_ward_reference"] = n / t_ref
+    out["fit_s_paper_116"] = _best_of(lambda: fit(m))
+    dense = measure(ref, protocol="dense", step_deg=6, noise=0.01, rng=2)
+    out["dense_samples"] = len(dense)
+    out["fit_s_dense_rgb"] = _best_of(lambda: fit(dense))
+    try:
+        from kesbrdf.halfdiff import fit_halfdiff
+
+        out["fit_s_dense_rgb_halfdiff"] = _best_of(lambda: fit_halfdiff(dense), 2)
+    except ImportError:
+        pass
+    ratios = {}
+    for name, reference in REFERENCES.items():
+        r = compare_reference(measure(reference, noise=0.01, rng=3), reference, fallback="log")
+        ratios[name] = r["ratio_kes_to"]
+    out["kes_rmse_over_baseline_rmse"] = ratios
+    return out
