@@ -163,6 +163,9 @@ def lookup(model, phi, gamma) -> np.ndarray:
 def evaluate(model, wi, wr, mapping: str = "deviation") -> np.ndarray:
     """f_r(wi, wr) of a model in 1/sr, shape broadcast(wi, wr)[:-1] + (C,).
 
+    A ``kes-halfdiff`` model (several incidence angles, :mod:`kesbrdf.halfdiff`)
+    defines its own (φ_h, θ_h, θ_d) mapping and ignores ``mapping``.
+
     >>> import numpy as np
     >>> from kesbrdf.gonio import measure
     >>> from kesbrdf.model import fit
@@ -174,6 +177,11 @@ def evaluate(model, wi, wr, mapping: str = "deviation") -> np.ndarray:
     True
     """
     validate_mapping(mapping)
+    if getattr(model, "kind", "kes") == "kes-halfdiff":
+        # the (θ_h, θ_d) model defines its own mapping (kesbrdf.halfdiff)
+        from kesbrdf.halfdiff import evaluate_halfdiff
+
+        return evaluate_halfdiff(model, wi, wr)
     wi = np.asarray(wi, float)
     wr = np.asarray(wr, float)
     wi, wr = np.broadcast_arrays(wi, wr)

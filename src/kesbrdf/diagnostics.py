@@ -75,6 +75,14 @@ def gamma0_behaviour(model) -> dict:
     return {"q_max_over_min_by_gamma_deg": out, "measured_peaks": model.diagnostics.get("gamma0_peaks", {})}
 
 
+def _mirror(model) -> dict:
+    if getattr(model, "kind", "kes") == "kes-halfdiff":
+        from kesbrdf.halfdiff import mirror_behaviour
+
+        return mirror_behaviour(model)
+    return gamma0_behaviour(model)
+
+
 def diagnose(model, mapping: str = "deviation", theta_deg=(0, 20, 40, 60, 80), phi_deg=(0, 45, 90, 135)) -> dict:
     """All diagnostics of a model as plain numbers (JSON-ready)."""
     def brdf(wi, wr):
@@ -99,7 +107,7 @@ def diagnose(model, mapping: str = "deviation", theta_deg=(0, 20, 40, 60, 80), p
             "max": albedo.max(axis=0).tolist(),
             "above_one": flagged,
         },
-        "gamma0": gamma0_behaviour(model),
+        "gamma0": _mirror(model),
         "kes": {
             "fallback_gamma_deg": model.diagnostics.get("fallback_gamma_deg", []),
             "floored": len(model.diagnostics.get("floored", [])),

@@ -15,6 +15,9 @@ def add_arguments(p):
     p.add_argument("--fallback", choices=("error", "log"), default="error",
                    help="where K(phi) <= 0 between orientations: fail, or interpolate log rho")
     p.add_argument("--body", default="auto", help="Lambertian body term: auto, none, or a value in 1/sr")
+    p.add_argument("--kind", choices=("kes", "kes-halfdiff"), default="kes",
+                   help="kes: the paper's table rho(phi, gamma); kes-halfdiff: KES per (theta_h, theta_d) "
+                   "for data with several incidence angles per orientation")
     p.add_argument("--interpolation", choices=("kes", "nearest", "linear"), default="kes",
                    help="interpolation over phi (nearest/linear are baselines)")
 
@@ -34,6 +37,13 @@ def run(args) -> int:
             from kesbrdf.errors import KesbrdfError
 
             raise KesbrdfError(f"--body: expected auto, none or a number, got {args.body!r}") from None
+    if args.kind == "kes-halfdiff":
+        from kesbrdf.halfdiff import fit_halfdiff
+
+        model = fit_halfdiff(m, orientations=args.orientations, fallback=args.fallback, body=body)
+        model.save(args.output)
+        stderr(f"wrote {args.output}: kes-halfdiff, table {tuple(model.table.shape)}, channels {', '.join(model.channels)}")
+        return 0
     model = fit(m, orientations=args.orientations, fallback=args.fallback, body=body, interpolation=args.interpolation)
     model.save(args.output)
     d = model.diagnostics

@@ -46,6 +46,10 @@ def decode_array(obj: dict, name: str = "array", source=None) -> np.ndarray:
 
 
 def model_to_dict(model) -> dict:
+    if getattr(model, "kind", "kes") == "kes-halfdiff":
+        from kesbrdf.halfdiff import to_dict
+
+        return to_dict(model)
     return {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
@@ -87,6 +91,10 @@ def model_from_dict(doc, source=None):
     version = doc.get("format_version")
     if version != FORMAT_VERSION:
         raise ModelError(f"{where(source)}expected model format version {FORMAT_VERSION}, got {version!r}")
+    if doc.get("kind") == "kes-halfdiff":
+        from kesbrdf.halfdiff import from_dict
+
+        return from_dict(doc, source)
     arrays = doc.get("arrays", {})
     missing = [a for a in ARRAYS if a not in arrays]
     if missing:

@@ -1,0 +1,674 @@
+r"""KES over the half-vector azimuth for measurements with several incidence angles.
+
+The ``"kes"`` model (:mod:`kesbrdf.model`) uses one incidence line θ_i + θ_r = 90°,
+so over the hemisphere it extrapolates by assumption (DESIGN §4).  When every
+orientation was measured at many (θ_i, θ_r) pairs — ``kesbrdf.gonio.measure(ref,
+protocol="dense")`` — this module builds the ``"kes-halfdiff"`` model, which keeps
+them all: for a pair (wi, wr) it takes the half vector's azimuth as φ, reads each
+measured orientation's in-plane table at the in-plane pair with the same half and
+difference angles (θ_h, θ_d), and applies KES over φ (DESIGN §4, last paragraphs).
+
+In-plane geometry
+-----------------
+At orientation ψ the light is at azimuth ψ + π and polar angle θ_i, the viewer at ψ
+and θ_r.  The half vector h = normalize(wi + wr) then lies in the plane of incidence:
+
+.. math::
+
+    \phi_h = \begin{cases}\psi & \theta_r \ge \theta_i\\ \psi + \pi & \theta_r < \theta_i\end{cases},
+    \qquad \theta_h = \frac{|\theta_r - \theta_i|}{2},
+    \qquad \theta_d = \angle(\omega_i, h) = \frac{\theta_i + \theta_r}{2}.
+
+Orientation k (ψ = k·π/4) therefore fills the half-azimuth slots k (θ_r ≥ θ_i) and
+k + 4 (θ_r ≤ θ_i) of :data:`kesbrdf.kes.HALF_AZIMUTHS`; mirror samples (θ_i = θ_r)
+go to both.  In-plane samples cover the triangle θ_h ≤ θ_d, θ_h + θ_d = max(θ_i, θ_r)
+≤ θ_max.
+
+How the table is filled
+-----------------------
+1. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
+   samples used (as :func:`kesbrdf.model.fit`), ``"none"`` is c = 0, a number sets c.
+2. Normalisation (``normalisation="sqrtcos"``, default): the table holds
+   q = (f_r − c)·w with w = √(cos θ_i cos θ_r), the paper's eq. 3 quantity used by the
+   ``"kes"`` kind too.  In-plane, w is a function of (θ_h, θ_d) alone, so this
+   changes nothing at the measured geometries; off the plane the evaluation divides
+   by the pair's own w, which keeps a lobe's 1/w growth toward grazing angles.
+   ``"none"`` (w = 1) tabulates f_r − c itself, as read literally from DESIGN §4.
+   Measured on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90° and 45°, viewer to
+   80°, dense 6° protocol): anisotropic Ward α = 0.15/0.3, RMSE 0.0012 ("sqrtcos")
+   vs 0.0015 ("none"); Ashikhmin–Shirley n = 10/100, 0.037 vs 0.033.
+3. Resampling per slot: the lobe part (f_r − c)·w of the slot's samples, scattered
+   over (θ_h, θ_d), is interpolated linearly (Delaunay,
+   ``scipy.interpolate.LinearNDInterpolator``) onto a regular grid with the data's
+   natural step (3° for a 6° (θ_i, θ_r) grid, so that every sample is a grid node).
+   θ_d is compressed by :data:`THETA_D_SCALE` before the triangulation: a lobe varies
+   fast with θ_h and slowly with θ_d, and on the checkerboard the samples form in
+   (θ_h, θ_d) the compressed metric makes the triangulation interpolate at constant
+   θ_h.  Grid nodes outside the measured in-plane triangle keep θ_h and clamp θ_d into
+   [θ_h, θ_max − θ_h]: nodes with θ_h > θ_d (light and viewer on the same side of the
+   normal, never in-plane) read θ_i = 0, nodes past the last measured angle read
+   max(θ_i, θ_r) = θ_max.  θ_h is kept because the lobe depends on it most; clamping
+   θ_h down to θ_d instead puts the mirror peak on the retro-reflection direction
+   (hemisphere RMSE 0.05–0.10 instead of 0.001–0.003 on Ward references).
+   Gaps of scattered data outside the convex hull take the nearest sample.
+4. Body back in: at every node the measured quantity Q = lobe + c·w(node) is formed;
+   KES works on it, body included, exactly as :func:`kesbrdf.model.fit` does.  (KES on
+   the bare lobe K = 1/(f − c) blows up where the lobe is far below the body:
+   hemisphere RMSE 0.22 instead of 0.0012 on Ward α = 0.15/0.3.)
+5. Noise floor: Q is floored at ``noise_floor`` (default 1e-4 × the channel's peak Q,
+   as :func:`kesbrdf.model.fit`) so that K = 1/Q is finite; the floored node counts
+   are recorded in ``diagnostics["floored"]``.
+6. KES: for every (θ_h, θ_d) node the whole-circle interpolation of K = 1/Q over φ
+   (:func:`kesbrdf.kes.interpolate_circle`, 3 or 4 orientations) fills a φ grid of
+   ``n_phi`` cells.  Where K(φ) ≤ 0 somewhere, ``fallback="error"`` raises
+   :class:`~kesbrdf.errors.KESError` and ``fallback="log"`` interpolates log Q at that
+   node instead; those nodes are recorded in ``diagnostics["fallback"]``.
+7. The body is split off again: ``table[φ, θ_h, θ_d, channel] = max(Q(φ) − c·w, 0)``.
+
+With the paper's protocol (one line θ_i + θ_r = 90°) each slot's samples lie on the
+line θ_d = 45°; the lobe is interpolated along it and held constant in θ_d (the body
+weight still follows each node's geometry), close to the ``"kes"`` model read
+through the ``halfvector`` mapping.
+
+Evaluation
+----------
+For a pair (wi, wr) above the horizon: h = wi + wr; φ_h = azimuth of h (where h has
+no in-plane component, the azimuth of wr − wi, the plane of incidence, as
+:func:`kesbrdf.brdf.to_phi_gamma`); θ_h = angle(h, z); θ_d = angle(wi, h), computed
+as half the angle between wi and wr; then
+
+.. math:: f_r = c + \frac{T(\phi_h, \theta_h, \theta_d)}{\sqrt{\cos\theta_i\cos\theta_r}}
+
+with T read by trilinear interpolation (φ periodic, θ_h and θ_d clamped to the grid).
+(``normalisation="none"``: without the division).  Swapping wi and wr leaves h, θ_h
+and θ_d unchanged, so the model is reciprocal by construction (at h ∥ z the swap
+turns φ_h by π, and the table's θ_h = 0 row is π-periodic because both halves hold
+the same mirror samples); every in-plane input sample sits on a grid
+node and is returned exactly (up to round-off), floored samples and the normal pair
+θ_i = θ_r = 0 excepted (the same geometry at every ψ: its samples are averaged).
+Directions at or below the horizon give 0; NaN in gives NaN out.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kesbrdf import kes
+from kesbrdf._version import __version__
+from kesbrdf.brdf import _azimuth
+from kesbrdf.errors import KESError, MeasurementError, ModelError, where
+from kesbrdf.measurement import Measurement
+from kesbrdf.model import FALLBACKS, ORIENTATION_TOL, RELATIVE_NOISE_FLOOR, _select_orientations
+
+__all__ = [
+    "KIND",
+    "NORMALISATIONS",
+    "HalfDiffModel",
+    "fit_halfdiff",
+    "evaluate_halfdiff",
+    "in_plane_half_diff",
+    "to_half_diff",
+    "lookup_halfdiff",
+    "mirror_behaviour",
+    "to_dict",
+    "from_dict",
+]
+
+#: ``kind`` of the model file (docs/formats.md).
+KIND = "kes-halfdiff"
+#: What the table holds: ``"sqrtcos"`` q = (f − c)·√(cos θ_i cos θ_r) (default, paper
+#: eq. 3), ``"none"`` the lobe f − c itself.
+NORMALISATIONS = ("sqrtcos", "none")
+#: θ_d is multiplied by this before the Delaunay triangulation (module docstring,
+#: step 3): < 1 makes the triangulation interpolate along θ_d at constant θ_h.
+THETA_D_SCALE = 0.5
+#: Default φ resolution (1°: the measured azimuths k·45° fall on the grid).
+DEFAULT_N_PHI = 360
+#: Finest default θ step of the table (keeps the table small for scattered data).
+MIN_THETA_STEP = math.radians(1.0)
+#: Angles closer than this are the same grid value (radians; float round-off).
+ANGLE_TOL = 1e-9
+#: Step used when the data's angles are not on a common grid.
+SCATTERED_THETA_STEP = math.radians(2.0)
+
+_ARRAYS = ("phi_grid", "theta_h_grid", "theta_d_grid", "table", "body")
+
+
+@dataclass
+class HalfDiffModel:
+    """A fitted ``kes-halfdiff`` model (module docstring).
+
+    Attributes
+    ----------
+    channels : tuple of str
+    phi_grid : ndarray (n_phi,)
+        Half-vector azimuths j·2π/n_phi, radians, periodic.
+    theta_h_grid, theta_d_grid : ndarray
+        Uniform grids from 0, radians.
+    table : ndarray (n_phi, n_theta_h, n_theta_d, C)
+        Lobe quantity (``parameters["normalisation"]``), ≥ 0.
+    body : ndarray (C,)
+        Lambertian body term c, 1/sr.
+    """
+
+    channels: tuple[str, ...]
+    phi_grid: np.ndarray
+    theta_h_grid: np.ndarray
+    theta_d_grid: np.ndarray
+    table: np.ndarray
+    body: np.ndarray
+    kind: str = KIND
+    parameters: dict = field(default_factory=dict)
+    diagnostics: dict = field(default_factory=dict)
+    input_info: dict = field(default_factory=dict)
+    kesbrdf_version: str = __version__
+
+    @property
+    def n_channels(self) -> int:
+        return len(self.channels)
+
+    @property
+    def orientations(self) -> int:
+        return int(self.parameters.get("orientations", 4))
+
+    def save(self, path):
+        """Write the model file atomically (same JSON layout as the ``kes`` kind)."""
+        import json
+
+        from kesbrdf._atomic import write_text
+
+        return write_text(path, json.dumps(to_dict(self), indent=1, allow_nan=False) + "\n")
+
+
+# ---------------------------------------------------------------------------------
+def in_plane_half_diff(theta_i, theta_r):
+    r"""(θ_h, θ_d, upper) of in-plane pairs (module docstring).
+
+    ``upper`` is true where θ_r ≥ θ_i (half vector at azimuth ψ, slot k).
+
+    >>> [round(float(np.degrees(v)), 9) for v in in_plane_half_diff(np.radians(12.0), np.radians(30.0))[:2]]
+    [9.0, 21.0]
+    """
+    theta_i = np.asarray(theta_i, float)
+    theta_r = np.asarray(theta_r, float)
+    return np.abs(theta_r - theta_i) / 2.0, (theta_i + theta_r) / 2.0, theta_r >= theta_i
+
+
+def to_half_diff(wi, wr):
+    """(φ_h, θ_h, θ_d) of direction pairs, radians (module docstring, Evaluation).
+
+    Parameters
+    ----------
+    wi, wr : array_like, shape (..., 3)
+        Unit vectors toward the light and the viewer.
+
+    Returns
+    -------
+    phi_h : ndarray
+        Half-vector azimuth in [0, 2π); the plane of incidence where h ∥ z.
+    theta_h : ndarray
+        Angle between h and the normal, [0, π/2) above the horizon.
+    theta_d : ndarray
+        Angle between wi (or wr) and h, [0, π/2].
+
+    >>> wi = np.array([-np.sin(0.2), 0, np.cos(0.2)]); wr = np.array([np.sin(0.6), 0, np.cos(0.6)])
+    >>> [round(float(v), 12) for v in to_half_diff(wi, wr)]
+    [0.0, 0.2, 0.4]
+    """
+    wi = np.asarray(wi, float)
+    wr = np.asarray(wr, float)
+    wi, wr = np.broadcast_arrays(wi, wr)
+    # h need not be normalised for its angles; every expression below is symmetric
+    # in (wi, wr) bit for bit (except φ_h at h ∥ z, where the table is π-periodic)
+    h = wi + wr
+    phi_h = _azimuth(h, wr - wi)
+    theta_h = np.arctan2(np.hypot(h[..., 0], h[..., 1]), h[..., 2])
+    # h bisects wi and wr: angle(wi, h) is half the angle between wi and wr
+    theta_d = 0.5 * np.arctan2(np.linalg.norm(np.cross(wi, wr), axis=-1), np.sum(wi * wr, axis=-1))
+    return phi_h, theta_h, theta_d
+
+
+def _natural_step(values, step):
+    """Grid step: ``step`` if given, else the smallest spacing of the data's angles."""
+    if step is not None:
+        step = float(step)
+        if not step > 0:
+            raise KESError(f"expected a positive theta step, got {step!r}")
+        return step, "given"
+    raw = np.asarray(values, float)
+    v = np.unique(np.round(raw / ANGLE_TOL) * ANGLE_TOL)
+    spacing = np.diff(v)
+    spacing = spacing[spacing > 10 * ANGLE_TOL]
+    if spacing.size == 0:
+        return SCATTERED_THETA_STEP, "scattered"
+    candidate = float(spacing.min())
+    on_grid = np.allclose(v / candidate, np.round(v / candidate), atol=1e-6)
+    if on_grid and candidate >= MIN_THETA_STEP - ANGLE_TOL:
+        # full precision from the raw angles (the rounding above is only a key)
+        n = np.round(raw / candidate)
+        return float(np.sum(n * raw) / np.sum(n * n)), "natural"
+    return max(SCATTERED_THETA_STEP, MIN_THETA_STEP), "scattered"
+
+
+def _uniform_grid(vmax: float, step: float) -> np.ndarray:
+    n = int(math.ceil(vmax / step - 1e-6))
+    return np.arange(max(n, 1) + 1) * step
+
+
+def _in_plane_nodes(grid_h, grid_d, theta_max):
+    """(θ_h, θ_d) of the in-plane pair each grid node reads, shape (n_h, n_d) each.
+
+    θ_h is kept; θ_d is clamped into the measured in-plane range [θ_h, θ_max − θ_h]
+    (module docstring, step 3): θ_d < θ_h reads θ_i = 0, θ_d + θ_h > θ_max reads
+    max(θ_i, θ_r) = θ_max.
+    """
+    H, D = np.meshgrid(grid_h, grid_d, indexing="ij")
+    return H, np.clip(D, H, np.maximum(theta_max - H, H))
+
+
+def _resample_slot(theta_h, theta_d, q, H, D):
+    """q of one slot's scattered samples at the nodes (H, D), shape H.shape + (C,)."""
+    from scipy.interpolate import LinearNDInterpolator, NearestNDInterpolator
+
+    nodes = np.stack([H.ravel(), THETA_D_SCALE * D.ravel()], axis=-1)
+    points = np.stack([theta_h, THETA_D_SCALE * theta_d], axis=-1)
+    # merge duplicated geometries (repeated measurements) by averaging
+    key = np.round(points / ANGLE_TOL).astype(np.int64)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    counts = np.bincount(inverse)
+    q_mean = np.zeros((first.size, q.shape[1]))
+    np.add.at(q_mean, inverse, q)
+    q_mean /= counts[:, None]
+    points = points[first]
+    n_h_values = np.unique(key[:, 0]).size
+    n_d_values = np.unique(key[:, 1]).size
+    if points.shape[0] >= 3 and n_h_values > 1 and n_d_values > 1:
+        out = LinearNDInterpolator(points, q_mean)(nodes)
+        missing = np.isnan(out[:, 0])
+        if missing.any():
+            out[missing] = NearestNDInterpolator(points, q_mean)(nodes[missing])
+    else:
+        # one line of samples (e.g. the paper's θ_i + θ_r = 90°): 1-D along it
+        axis = 0 if n_h_values > 1 or n_d_values == 1 else 1
+        order = np.argsort(points[:, axis])
+        x = points[order, axis]
+        out = np.stack([np.interp(nodes[:, axis], x, q_mean[order, ch]) for ch in range(q.shape[1])], axis=-1)
+    return out.reshape(H.shape + (q.shape[1],))
+
+
+def _body(values_used, body, C):
+    if isinstance(body, str) and body == "auto":
+        return np.maximum(values_used.min(axis=0), 0.0), "auto"
+    if isinstance(body, str) and body == "none":
+        return np.zeros(C), "none"
+    try:
+        c = np.broadcast_to(np.asarray(body, float), (C,)).copy()
+    except ValueError:
+        raise KESError(f"expected body 'auto', 'none' or a number per channel, got {body!r}") from None
+    return c, "value"
+
+
+def fit_halfdiff(
+    m: Measurement,
+    orientations: int | None = None,
+    fallback: str = "error",
+    body="auto",
+    noise_floor="auto",
+    n_phi: int = DEFAULT_N_PHI,
+    theta_step=None,
+    normalisation: str = "sqrtcos",
+) -> HalfDiffModel:
+    """Build the ``kes-halfdiff`` model from in-plane samples at several θ_i.
+
+    Parameters
+    ----------
+    m : Measurement
+        In-plane rows at ψ = 0, 45, 90° (and 135°), any (θ_i, θ_r) pairs; the more
+        incidence angles, the more of the hemisphere is measured rather than assumed.
+    orientations : {None, 3, 4}
+        As :func:`kesbrdf.model.fit`.
+    fallback : {"error", "log"}
+        What to do where K(φ) ≤ 0 between orientations (DESIGN §3).
+    body : "auto", "none" or float
+        Lambertian body term c in 1/sr (module docstring).
+    noise_floor : "auto" or float
+        Floor of q, same unit as the table.
+    n_phi : int
+        φ cells, a multiple of 8.
+    theta_step : float, optional
+        (θ_h, θ_d) grid step, radians (default: the data's natural step).
+    normalisation : {"sqrtcos", "none"}
+        What the table holds (:data:`NORMALISATIONS`, module docstring step 2).
+
+    Raises
+    ------
+    MeasurementError
+        Missing orientations, NaN values, or an orientation without samples on both
+        sides of the mirror direction.
+    KESError
+        K(φ) ≤ 0 somewhere with ``fallback="error"``; bad options.
+
+    Returns
+    -------
+    HalfDiffModel
+    """
+    if fallback not in FALLBACKS:
+        raise KESError(f"unknown fallback {fallback!r}; expected one of {', '.join(FALLBACKS)}")
+    if normalisation not in NORMALISATIONS:
+        raise KESError(
+            f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}"
+        )
+    if not (isinstance(n_phi, (int, np.integer)) and n_phi > 0 and n_phi % 8 == 0):
+        raise KESError(f"expected n_phi to be a positive multiple of 8, got {n_phi!r}")
+    orientations = _select_orientations(m, orientations)
+    psis = np.radians([0.0, 45.0, 90.0, 135.0][:orientations])
+    C = m.n_channels
+    source = m.source or "measurement"
+
+    # 1. in-plane rows per orientation and their (θ_h, θ_d)
+    in_plane = np.flatnonzero(m.is_in_plane)
+    rows = [in_plane[np.abs(m.psi[in_plane] - psi) < ORIENTATION_TOL] for psi in psis]
+    used = np.concatenate(rows)
+    finite = np.all(np.isfinite(m.values[used]), axis=1)
+    if not finite.all():
+        raise MeasurementError(
+            f"{source}: expected finite values in the in-plane rows, got {int((~finite).sum())} NaN/inf row(s)"
+        )
+    theta_h, theta_d, _ = in_plane_half_diff(m.theta_i[used], m.theta_r[used])
+    for k, r in enumerate(rows):
+        n_distinct = np.unique(np.round(m.theta_i[r] - m.theta_r[r], 9)).size
+        if r.size < 2 or n_distinct < 2:
+            raise MeasurementError(
+                f"{source}: orientation psi = {np.degrees(psis[k]):g} deg needs samples at two or more "
+                f"deviations theta_r - theta_i, got {n_distinct}"
+            )
+
+    # 1b. body term
+    c, body_mode = _body(m.values[used], body, C)
+
+    def weight(theta_i, theta_r):
+        if normalisation == "none":
+            return np.ones_like(np.asarray(theta_i, float))
+        return np.sqrt(np.clip(np.cos(theta_i) * np.cos(theta_r), 0.0, None))
+
+    # 2–3. regular (θ_h, θ_d) grid; per slot, the lobe part of q resampled onto it
+    step, step_mode = _natural_step(np.concatenate([theta_h, theta_d]), theta_step)
+    grid_h = _uniform_grid(float(theta_h.max()), step)
+    grid_d = _uniform_grid(float(theta_d.max()), step)
+    theta_max = float(np.max(np.maximum(m.theta_i[used], m.theta_r[used])))
+    H, D = _in_plane_nodes(grid_h, grid_d, theta_max)
+    w_nodes = weight(D - H, D + H)  # in-plane √(cos θ_i cos θ_r) at the nodes read
+    slots = kes.half_slots(orientations)
+    q_half = np.full((grid_h.size, grid_d.size, 8, C), np.nan)
+    slot_counts = {}
+    for k, r in enumerate(rows):
+        th, td, upper = in_plane_half_diff(m.theta_i[r], m.theta_r[r])
+        mirror = np.abs(m.theta_r[r] - m.theta_i[r]) < ANGLE_TOL
+        lobe = (m.values[r] - c) * weight(m.theta_i[r], m.theta_r[r])[:, None]
+        for slot, sel in ((k, upper | mirror), (k + 4, ~upper | mirror)):
+            if np.count_nonzero(sel) < 2:
+                raise MeasurementError(
+                    f"{source}: orientation psi = {np.degrees(psis[k]):g} deg has fewer than two samples "
+                    f"with theta_r {'>=' if slot < 4 else '<='} theta_i"
+                )
+            q_half[:, :, slot, :] = _resample_slot(th[sel], td[sel], lobe[sel], H, D)
+            slot_counts[str(slot)] = int(np.count_nonzero(sel))
+    # 4. body back in: KES works on the measured quantity (as kesbrdf.model.fit)
+    body_q = c * w_nodes[..., None]  # (h, d, C)
+    q_half[:, :, slots, :] += body_q[:, :, None, :]
+    # θ_i = θ_r = 0 is one geometry for every ψ: its samples are averaged (with noise
+    # they differ, and the pair has no azimuth to tell them apart)
+    normal_pair = {}
+    if all(np.any((m.theta_i[r] < ANGLE_TOL) & (m.theta_r[r] < ANGLE_TOL)) for r in rows):
+        at_normal = q_half[0, 0][slots]  # (slots, C)
+        mean = at_normal.mean(axis=0)
+        q_half[0, 0, slots, :] = mean
+        normal_pair = {
+            "averaged": True,
+            "max_rel_spread": float(
+                np.max(np.ptp(at_normal, axis=0) / np.maximum(np.abs(mean), np.finfo(float).tiny))
+            ),
+        }
+
+    # 5. noise floor
+    q_used = q_half[:, :, slots, :]
+    if isinstance(noise_floor, str) and noise_floor == "auto":
+        floor = np.maximum(RELATIVE_NOISE_FLOOR * np.nanmax(q_used, axis=(0, 1, 2)), np.finfo(float).tiny)
+    else:
+        floor = np.broadcast_to(np.asarray(noise_floor, float), (C,)).copy()
+        if np.any(~(floor > 0)):
+            raise KESError(f"expected a positive noise floor, got {noise_floor!r}")
+    low = q_used < floor
+    floored = {
+        "nodes": int(np.count_nonzero(low)),
+        "of": int(low.size),
+        "per_channel": {ch: int(np.count_nonzero(low[..., i])) for i, ch in enumerate(m.channels)},
+        "per_azimuth_deg": {
+            f"{int(round(np.degrees(kes.HALF_AZIMUTHS[s])))}": int(np.count_nonzero(low[:, :, j, :]))
+            for j, s in enumerate(slots)
+        },
+    }
+    q_half[:, :, slots, :] = np.maximum(q_used, floor)
+
+    # 6. KES over φ at every (θ_h, θ_d) node, vectorised over nodes and channels
+    phi_grid = np.arange(n_phi) * (2 * np.pi / n_phi)
+    K = kes.interpolate_circle(1.0 / q_half.transpose(0, 1, 3, 2), phi_grid, orientations)  # (h, d, C, φ)
+    bad = np.any(~(K > 0), axis=(2, 3))  # (h, d)
+    fallback_info = {"nodes": 0, "theta_h_deg": [], "theta_d_deg_range": []}
+    if bad.any():
+        bi, bj = np.nonzero(bad)
+        if fallback == "error":
+            raise KESError(
+                f"K(phi) = 1/rho <= 0 between the measured orientations at theta_h = "
+                f"{math.degrees(grid_h[bi[0]]):.4g} deg, theta_d = {math.degrees(grid_d[bj[0]]):.4g} deg "
+                f"({bi.size} node(s) affected): warp and weft differ too much for the KES form; use "
+                "fallback='log' (--fallback log) to interpolate log rho there instead"
+            )
+        q_log = kes.interpolate_circle_log(q_half[bi, bj].transpose(0, 2, 1), phi_grid, orientations)
+        K[bi, bj] = 1.0 / q_log
+        fallback_info = {
+            "nodes": int(bi.size),
+            "theta_h_deg": sorted({round(float(np.degrees(grid_h[i])), 6) for i in bi}),
+            "theta_d_deg_range": [
+                round(float(np.degrees(grid_d[bj].min())), 6),
+                round(float(np.degrees(grid_d[bj].max())), 6),
+            ],
+        }
+    # 7. split off the body again: the table holds the lobe
+    table = np.transpose(1.0 / K, (3, 0, 1, 2)) - body_q[None]  # (φ, h, d, C)
+    total = np.abs(table + body_q[None])
+    dips = table < -1e-12 * total
+    clamped = {
+        "entries": int(np.count_nonzero(dips)),
+        "of": int(table.size),
+        # deepest dip of Q(φ) below the body, relative to Q: what the clamp removed
+        "max_rel": float(np.max(-table[dips] / np.maximum(total[dips], np.finfo(float).tiny), initial=0.0)),
+    }
+    table = np.ascontiguousarray(np.maximum(table, 0.0))
+
+    diagnostics = {
+        "floored": floored,
+        "noise_floor": floor.tolist(),
+        "fallback": fallback_info,
+        "unused_rows": int(len(m) - used.size),
+        "samples_per_azimuth_slot": slot_counts,
+        "theta_step_deg": round(math.degrees(step), 9),
+        "theta_step_mode": step_mode,
+        "lobe_clamped": clamped,
+        "normal_pair": normal_pair,
+    }
+    return HalfDiffModel(
+        channels=tuple(m.channels),
+        phi_grid=phi_grid,
+        theta_h_grid=grid_h,
+        theta_d_grid=grid_d,
+        table=table,
+        body=c,
+        parameters={
+            "orientations": orientations,
+            "fallback": fallback,
+            "body": body_mode if body_mode != "value" else c.tolist(),
+            "noise_floor": noise_floor if isinstance(noise_floor, str) else floor.tolist(),
+            "normalisation": normalisation,
+            "theta_interpolation": "linear",
+            "theta_d_scale": THETA_D_SCALE,
+            "n_phi": int(n_phi),
+        },
+        diagnostics=diagnostics,
+        input_info={
+            "name": m.source,
+            "sha256": m.sha256,
+            "sample": m.metadata.get("sample"),
+            "quantity": m.metadata.get("quantity", "brdf"),
+            "simulated": m.metadata.get("simulated"),
+            "n_samples": len(m),
+        },
+    )
+
+
+# ---------------------------------------------------------------------------------
+def lookup_halfdiff(model: HalfDiffModel, phi_h, theta_h, theta_d) -> np.ndarray:
+    """Trilinear lookup of the table at (φ_h, θ_h, θ_d), shape (..., C).
+
+    φ is periodic; θ_h and θ_d are clamped to their grids.  NaN in gives NaN out.
+    """
+    phi_h, theta_h, theta_d = np.broadcast_arrays(
+        np.asarray(phi_h, float), np.asarray(theta_h, float), np.asarray(theta_d, float)
+    )
+    T = model.table
+    n_phi, n_h, n_d = T.shape[:3]
+    u = np.mod(phi_h, 2 * np.pi) * (n_phi / (2 * np.pi))
+    v = np.clip(theta_h, 0.0, model.theta_h_grid[-1]) / (model.theta_h_grid[1] - model.theta_h_grid[0])
+    w = np.clip(theta_d, 0.0, model.theta_d_grid[-1]) / (model.theta_d_grid[1] - model.theta_d_grid[0])
+    nan = ~(np.isfinite(u) & np.isfinite(v) & np.isfinite(w))
+    u, v, w = (np.where(nan, 0.0, a) for a in (u, v, w))
+    i0 = np.floor(u).astype(np.intp)
+    fu = (u - i0)[..., None]
+    i0 %= n_phi
+    i1 = (i0 + 1) % n_phi
+    j0 = np.minimum(np.floor(v).astype(np.intp), n_h - 1)
+    fv = (v - j0)[..., None]
+    j1 = np.minimum(j0 + 1, n_h - 1)
+    k0 = np.minimum(np.floor(w).astype(np.intp), n_d - 1)
+    fw = (w - k0)[..., None]
+    k1 = np.minimum(k0 + 1, n_d - 1)
+
+    def along_phi(j, k):
+        return T[i0, j, k] * (1 - fu) + T[i1, j, k] * fu
+
+    q = (along_phi(j0, k0) * (1 - fv) + along_phi(j1, k0) * fv) * (1 - fw) + (
+        along_phi(j0, k1) * (1 - fv) + along_phi(j1, k1) * fv
+    ) * fw
+    return np.where(nan[..., None], np.nan, q)
+
+
+def evaluate_halfdiff(model: HalfDiffModel, wi, wr) -> np.ndarray:
+    """f_r(wi, wr) of a ``kes-halfdiff`` model in 1/sr, shape broadcast(wi, wr)[:-1] + (C,).
+
+    .. math:: f_r = c + T(\\phi_h, \\theta_h, \\theta_d) / \\sqrt{\\cos\\theta_i\\cos\\theta_r}
+
+    (without the square root for ``normalisation="none"``).  Zero when either
+    direction is at or below the horizon; NaN in gives NaN out.
+
+    >>> from kesbrdf.gonio import measure
+    >>> from kesbrdf.references.ward import AnisotropicWard
+    >>> m = measure(AnisotropicWard(0.2, 0.3), protocol="dense", step_deg=10)
+    >>> model = fit_halfdiff(m)
+    >>> bool(np.allclose(evaluate_halfdiff(model, m.wi, m.wr), m.values, rtol=1e-9))
+    True
+    """
+    wi = np.asarray(wi, float)
+    wr = np.asarray(wr, float)
+    wi, wr = np.broadcast_arrays(wi, wr)
+    cos_theta_i = wi[..., 2]
+    cos_theta_r = wr[..., 2]
+    above = (cos_theta_i > 0) & (cos_theta_r > 0)
+    nan_in = np.isnan(wi).any(axis=-1) | np.isnan(wr).any(axis=-1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        phi_h, theta_h, theta_d = to_half_diff(wi, wr)
+        q = lookup_halfdiff(model, phi_h, theta_h, theta_d)
+        if model.parameters.get("normalisation", "sqrtcos") == "sqrtcos":
+            norm = np.sqrt(np.where(above, cos_theta_i * cos_theta_r, 1.0))
+            q = q / norm[..., None]
+        f = model.body + q
+    f = np.where(above[..., None], f, 0.0)
+    return np.where(nan_in[..., None], np.nan, f)
+
+
+def mirror_behaviour(model: HalfDiffModel, n_theta_h: int = 3, theta_d_deg=(0.0, 30.0, 60.0)) -> dict:
+    """How the lobe varies with φ_h as θ_h → 0 (the analogue of the ``kes`` kind's γ → 0
+    report, DESIGN §4): max/min of the table over φ at the first θ_h grid values, for a
+    few θ_d, per channel.  The measured mirror peaks differ between orientations, so
+    φ_h is a discontinuity at h = z.
+    """
+    out = {}
+    step_d = model.theta_d_grid[1] - model.theta_d_grid[0]
+    for theta_d in theta_d_deg:
+        k = int(min(round(math.radians(theta_d) / step_d), model.theta_d_grid.size - 1))
+        rows = {}
+        for j in range(min(n_theta_h, model.theta_h_grid.size)):
+            q = model.table[:, j, k, :]
+            qmin = np.maximum(q.min(axis=0), np.finfo(float).tiny)
+            rows[f"{np.degrees(model.theta_h_grid[j]):.3g}"] = (q.max(axis=0) / qmin).tolist()
+        out[f"{np.degrees(model.theta_d_grid[k]):.3g}"] = rows
+    return {"q_max_over_min_by_theta_d_deg_theta_h_deg": out, "channels": list(model.channels)}
+
+
+# ---------------------------------------------------------------------------------
+def to_dict(model: HalfDiffModel) -> dict:
+    """The model file document (same top-level layout as the ``kes`` kind)."""
+    from kesbrdf.io.model_file import FORMAT, FORMAT_VERSION, encode_array
+
+    return {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "kesbrdf_version": model.kesbrdf_version,
+        "kind": KIND,
+        "channels": list(model.channels),
+        "input": model.input_info,
+        "parameters": model.parameters,
+        "diagnostics": model.diagnostics,
+        "arrays": {name: encode_array(getattr(model, name)) for name in _ARRAYS},
+    }
+
+
+def from_dict(doc, source=None) -> HalfDiffModel:
+    """Inverse of :func:`to_dict`; errors name ``source``."""
+    from kesbrdf.io.model_file import FORMAT, FORMAT_VERSION, decode_array
+
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+        raise ModelError(f"{where(source)}expected format {FORMAT!r}, got {got!r}")
+    if doc.get("format_version") != FORMAT_VERSION:
+        raise ModelError(
+            f"{where(source)}expected model format version {FORMAT_VERSION}, got {doc.get('format_version')!r}"
+        )
+    if doc.get("kind") != KIND:
+        raise ModelError(f"{where(source)}expected model kind {KIND!r}, got {doc.get('kind')!r}")
+    arrays = doc.get("arrays", {})
+    missing = [a for a in _ARRAYS if a not in arrays]
+    if missing:
+        raise ModelError(f"{where(source)}missing array(s) {', '.join(missing)}")
+    arr = {name: decode_array(arrays[name], name, source) for name in _ARRAYS}
+    channels = tuple(doc.get("channels", ()))
+    expected = (arr["phi_grid"].size, arr["theta_h_grid"].size, arr["theta_d_grid"].size, len(channels))
+    if arr["table"].shape != expected or arr["body"].shape != (len(channels),):
+        raise ModelError(
+            f"{where(source)}expected table of shape {expected} and body of shape ({len(channels)},), "
+            f"got {arr['table'].shape} and {arr['body'].shape}"
+        )
+    if min(arr["theta_h_grid"].size, arr["theta_d_grid"].size) < 2:
+        raise ModelError(f"{where(source)}expected theta grids of at least 2 values")
+    return HalfDiffModel(
+        channels=channels,
+        kind=KIND,
+        parameters=doc.get("parameters", {}),
+        diagnostics=doc.get("diagnostics", {}),
+        input_info=doc.get("input", {}),
+        kesbrdf_version=doc.get("kesbrdf_version", __version__),
+        **arr,
+    )
