@@ -44,7 +44,7 @@ import numpy as np
 
 from kesbrdf import kes
 from kesbrdf._version import __version__
-from kesbrdf.errors import KESError, MeasurementError, ModelError
+from kesbrdf.errors import KESError, MeasurementError
 from kesbrdf.measurement import Measurement
 
 __all__ = ["Model", "fit", "load", "INTERPOLATIONS", "FALLBACKS"]
@@ -333,11 +333,6 @@ def fit(
             "n_samples": len(m),
         },
     )
-
-
-def HALF_PSI(slot: int) -> float:
-    """Orientation ψ of a half-sample slot."""
-    return float(kes.HALF_AZIMUTHS[slot % 4])
 
 
 def _gamma_grid(nodes: np.ndarray, step) -> np.ndarray:

@@ -1,0 +1,51 @@
+"""Metrics, leave-one-orientation-out, reference comparison."""
+
+import numpy as np
+import pytest
+
+from kesbrdf.gonio import measure
+from kesbrdf.references.ward import AnisotropicWard
+from kesbrdf.validation import compare_reference, leave_one_orientation_out, metrics
+
+
+def test_metrics_by_hand():
+    pred = np.array([[1.0], [2.0], [4.0]])
+    truth = np.array([[1.0], [1.0], [4.0]])
+    m = metrics(pred, truth, ["v"])["v"]
+    assert m["rmse"] == pytest.approx(np.sqrt(1 / 3), rel=1e-12)
+    assert m["max_abs"] == pytest.approx(1.0)
+    assert m["nrmse"] == pytest.approx(np.sqrt(1 / 3) / 2, rel=1e-12)
+    eps = 1e-3 * 4
+    assert m["log_rmse"] == pytest.approx(np.sqrt(np.log((2 + eps) / (1 + eps)) ** 2 / 3), rel=1e-12)
+
+
+def test_leave_one_orientation_out_is_exact_for_a_symmetric_fabric():
+    # Ward is symmetric under φ → π − φ, so the mirrored 135° predicts 45° exactly
+    m = measure(AnisotropicWard(0.1, 0.2, rho_d=0.2, rho_s=0.1))
+    res = leave_one_orientation_out(m)
+    assert res["0"]["possible"] is False and res["90"]["possible"] is False
+    assert res["45"]["metrics"]["all"]["rmse"] < 1e-12
+    assert res["135"]["metrics"]["all"]["rmse"] < 1e-12
+
+
+def test_leave_one_orientation_out_detects_asymmetry():
+    # a lobe rotated off the warp breaks the φ → π − φ symmetry
+    ref = AnisotropicWard(0.1, 0.25, rho_d=0.2, rho_s=0.1)
+    rot = np.radians(20)
+    R = np.array([[np.cos(rot), -np.sin(rot), 0], [np.sin(rot), np.cos(rot), 0], [0, 0, 1]])
+
+    def rotated(wi, wr):
+        return ref(wi @ R, wr @ R)
+
+    rotated.channels = ref.channels
+    res = leave_one_orientation_out(measure(rotated))
+    assert res["45"]["metrics"]["all"]["nrmse"] > 0.05
+
+
+def test_compare_reference_structure_and_perfect_isotropic():
+    iso = AnisotropicWard(0.2, 0.2, rho_d=0.3, rho_s=0.1)
+    r = compare_reference(measure(iso), iso)
+    held = r["cases"]["held_out_orientations"]
+    assert set(held) == {"kes", "nearest", "linear"}
+    assert held["kes"]["all"]["rmse"] < 1e-10  # isotropic: every orientation is exact
+    assert "hemisphere_theta_i30_phi_i90" in r["cases"]
