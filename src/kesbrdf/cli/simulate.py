@@ -18,6 +18,9 @@ def add_arguments(p):
     p.add_argument("--noise-floor", type=float, default=0.0, help="absolute noise std, 1/sr")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--images", metavar="DIR", help="also write camera frames + manifest (image-based acquisition)")
+    p.add_argument("--bit-depth", type=int, choices=(8, 16), default=16,
+                   help="camera frames' bit depth (16: TIFF, 8: PNG)")
+    p.add_argument("--vignetting", type=float, default=0.0, help="relative illumination fall-off k (1 - k r^2)")
 
 
 def run(args) -> int:
@@ -32,8 +35,19 @@ def run(args) -> int:
     reference = make_reference(args.reference, args.params)
     if args.images:
         from kesbrdf.acquisition.camera import simulate_images
+        from kesbrdf.acquisition.sensor import Sensor
 
-        manifest = simulate_images(reference, args.images, protocol=args.protocol, seed=args.seed)
+        manifest = simulate_images(
+            reference,
+            args.images,
+            protocol=args.protocol,
+            step_deg=args.step_deg,
+            orientations_deg=orientations,
+            seed=args.seed,
+            sensor=Sensor(bit_depth=args.bit_depth, vignetting=args.vignetting),
+            file_format="tiff" if args.bit_depth == 16 else "png",
+            sample=f"simulated {args.reference}",
+        )
         stderr(f"wrote frames and manifest {manifest}")
     m = measure(
         reference,
