@@ -37,7 +37,7 @@ test: venv
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
 
 test-web: venv viewer
-	cd viewer && npm run build -- --outDir ../build/viewer-check >/dev/null && \
+	cd viewer && npm run build -- --outDir ../build/viewer-check --emptyOutDir >/dev/null && \
 	  diff -r ../build/viewer-check ../src/kesbrdf/viewer/static >/dev/null || \
 	  { echo "viewer bundle in src/kesbrdf/viewer/static is stale: run 'make viewer-bundle'"; exit 1; }
 	cd viewer && KESBRDF_PYTHON=../$(PY) npm test

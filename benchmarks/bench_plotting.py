@@ -1,0 +1,51 @@
+"""Plotting benchmarks: time to build and save each of the paper's figures, and the
+HTML report, for the 116-sample satin model (seconds, best of a few runs)."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def _best_of(fn, repeat=3):
+    best = float("inf")
+    for _ in range(repeat):
+        t = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t)
+    return best
+
+
+def run() -> dict:
+    from kesbrdf.gonio import measure
+    from kesbrdf.model import fit
+    from kesbrdf.plotting.figures import FIGURES, make_figure
+    from kesbrdf.plotting.report import write_report
+    from kesbrdf.plotting.save import figure_bytes
+    from kesbrdf.references.ward import AnisotropicWard
+
+    ref = AnisotropicWard(alpha_x=0.08, alpha_y=0.22, rho_d=0.02, rho_s=0.12)
+    m = measure(ref)
+    model = fit(m)
+    out: dict = {}
+    for name in FIGURES:
+        def build_and_save(name=name):
+            fig = make_figure(name, model=model, measurement=m, reference=ref)
+            figure_bytes(fig, "png", dpi=100)
+
+        out[f"figure_{name}_png_s"] = _best_of(build_and_save)
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "report.html"
+        out["report_s"] = _best_of(lambda: write_report(path, model, m, ref), repeat=1)
+        out["report_bytes"] = path.stat().st_size
+    return out
+
+
+if __name__ == "__main__":  # pragma: no cover
+    import json
+
+    print(json.dumps(run(), indent=1))

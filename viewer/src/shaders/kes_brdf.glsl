@@ -1,0 +1,85 @@
+// kesbrdf model evaluation in GLSL ES 3.00, exactly the recipe of docs/formats.md
+// ("How to evaluate a model"). Shared by the real-time preview and the GLSL-Python
+// agreement test, so the test checks the code the preview runs.
+//
+// kesTable: RGBA32F texture, width n_phi (texel i = phi_i = i*2pi/n_phi), height
+// n_gamma (texel j = gamma_j = j*dGamma). Filtering is done here by hand with
+// texelFetch: phi wraps periodically, gamma is clamped, exactly like the numpy lookup.
+uniform highp sampler2D kesTable;
+uniform int kesNPhi;
+uniform int kesNGamma;
+uniform float kesDGamma;
+uniform vec3 kesBody;     // body term c in 1/sr (model's, or base_color/pi for a colourway)
+uniform int kesMapping;   // 0 deviation, 1 halfvector, 2 paper (eq. 3-4 literally)
+
+const float KES_PI = 3.141592653589793;
+const float KES_TWO_PI = 6.283185307179586;
+const float KES_GAMMA0_EPS = 1e-12;
+
+vec3 kesFetch(int i, int j) {
+  return texelFetch(kesTable, ivec2(i, j), 0).rgb;
+}
+
+// Bilinear lookup of q at (phi, gamma): periodic in phi, clamped in gamma.
+vec3 kesLookup(float phi, float gamma) {
+  float u = mod(phi, KES_TWO_PI) / KES_TWO_PI * float(kesNPhi);
+  float u0 = floor(u);
+  float fu = u - u0;
+  int i0 = int(u0) % kesNPhi;
+  int i1 = (i0 + 1) % kesNPhi;
+  float v = clamp(gamma / kesDGamma, 0.0, float(kesNGamma - 1));
+  float v0 = floor(v);
+  float fv = v - v0;
+  int j0 = min(int(v0), kesNGamma - 1);
+  int j1 = min(j0 + 1, kesNGamma - 1);
+  vec3 a = mix(kesFetch(i0, j0), kesFetch(i0, j1), fv);
+  vec3 b = mix(kesFetch(i1, j0), kesFetch(i1, j1), fv);
+  return mix(a, b, fu);
+}
+
+// (phi, gamma) of a pair for the deviation (0) or halfvector (1) mapping.
+void kesPhiGamma(vec3 wi, vec3 wr, out float phi, out float gamma) {
+  vec2 s;
+  if (kesMapping == 0) {
+    vec3 m = vec3(-wi.xy, wi.z);
+    gamma = atan(length(cross(wr, m)), dot(wr, m));
+    s = wi.xy + wr.xy;
+  } else {
+    vec3 h = normalize(wi + wr);
+    gamma = 2.0 * atan(length(h.xy), h.z);
+    s = h.xy;
+  }
+  // at the mirror direction: the plane of incidence
+  if (length(s) < KES_GAMMA0_EPS) s = wr.xy - wi.xy;
+  phi = atan(s.y, s.x);
+}
+
+// paper eq. 3-4 literally, as kesbrdf.brdf does it: rho_KES = q + body*sqrt(cos(gamma)/2)
+// (the measured quantity on the theta_i + theta_r = 90 deg line), divided by
+// sqrt(cos theta_i cos theta_r) * sin(beta), sin(beta) clamped at KES_PAPER_MIN_SIN_BETA.
+const float KES_PAPER_MIN_SIN_BETA = 1e-6;
+vec3 kesPaper(vec3 wi, vec3 wr) {
+  float thetaI = atan(length(wi.xy), wi.z);
+  float thetaR = atan(length(wr.xy), wr.z);
+  float phiI = atan(wi.y, wi.x);
+  float phiR = atan(wr.y, wr.x);
+  float phi = 0.5 * KES_PI - (phiI + phiR);
+  float gamma = thetaR - thetaI;
+  if (gamma < 0.0) phi += KES_PI;  // (phi, gamma < 0) is the deviation toward phi + pi
+  float s = sin(phiR - phiI - KES_PI);
+  float c = cos(thetaR);
+  float sinHalfBeta = clamp(0.5 * sqrt(s * s + c * c), 0.0, 1.0);
+  float sinBeta = max(sin(2.0 * asin(sinHalfBeta)), KES_PAPER_MIN_SIN_BETA);
+  vec3 rho = kesLookup(phi, abs(gamma)) + kesBody * sqrt(max(cos(gamma), 0.0) / 2.0);
+  return rho / (sqrt(wi.z * wr.z) * sinBeta);
+}
+
+// f_r in 1/sr per channel; zero at or below the horizon.
+vec3 kesBRDF(vec3 wi, vec3 wr) {
+  if (wi.z <= 0.0 || wr.z <= 0.0) return vec3(0.0);
+  if (kesMapping == 2) return kesPaper(wi, wr);
+  float phi;
+  float gamma;
+  kesPhiGamma(wi, wr, phi, gamma);
+  return kesBody + kesLookup(phi, gamma) / sqrt(wi.z * wr.z);
+}
