@@ -1,0 +1,121 @@
+"""``kesbrdf render MODEL --scene ... -o IMAGE``: render a model with Mitsuba 3."""
+
+from __future__ import annotations
+
+from kesbrdf.cli._common import stderr
+from kesbrdf.errors import KesbrdfError
+
+HELP = "Render a model (sphere, swatch, draped cloth or dress form) with Mitsuba 3; --animation renders a drape sequence."
+
+SCENES = ("sphere", "swatch", "drape", "dressform")
+
+
+def parse_resolution(text: str) -> tuple[int, int]:
+    """``"WxH"`` → (W, H)."""
+    w, sep, h = text.lower().partition("x")
+    try:
+        res = (int(w), int(h))
+    except ValueError:
+        res = None
+    if not sep or res is None or min(res) <= 0:
+        raise KesbrdfError(f"--resolution: expected WxH such as 320x240, got {text!r}")
+    return res
+
+
+def parse_rgb_flag(text: str | None, flag: str):
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        rgb = tuple(float(p) for p in parts)
+    except ValueError:
+        rgb = ()
+    if len(rgb) != 3 or min(rgb) < 0:
+        raise KesbrdfError(f"{flag}: expected three non-negative numbers R,G,B, got {text!r}")
+    return rgb
+
+
+def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
+    """Flags shared by ``render`` and ``colourways``."""
+    p.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
+    p.add_argument("--resolution", default=resolution, help=f"image size WxH (default {resolution})")
+    p.add_argument("--light", choices=("area", "sun", "none"), default="area", help="key light (default area)")
+    p.add_argument("--env", choices=("studio", "sky", "uniform", "none"), default="studio",
+                   help="generated environment: studio (soft boxes), sky (gradient + sun), uniform (furnace), none")
+    p.add_argument("--lobe-tint", default=None, metavar="R,G,B", help="tint of the measured lobe (default 1,1,1)")
+    p.add_argument("--mapping", choices=("deviation", "halfvector"), default="deviation",
+                   help="(phi, gamma) mapping (docs/formats.md); 'paper' is not renderable")
+    p.add_argument("--one-sided", action="store_true", help="shade back faces black (default: two-sided cloth)")
+    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for PNG/JPEG output")
+    p.add_argument("--max-depth", type=int, default=4, help="path length (default 4)")
+    p.add_argument("--seed", type=int, default=0, help="sampler seed")
+
+
+def render_options(args, **extra):
+    from kesbrdf.render.scenes import RenderOptions
+
+    return RenderOptions(
+        spp=args.spp,
+        resolution=parse_resolution(args.resolution),
+        light=args.light,
+        env=args.env,
+        lobe_tint=parse_rgb_flag(args.lobe_tint, "--lobe-tint"),
+        mapping=args.mapping,
+        two_sided=not args.one_sided,
+        max_depth=args.max_depth,
+        seed=args.seed,
+        exposure=args.exposure,
+        **extra,
+    ).validate()
+
+
+def add_arguments(p):
+    p.add_argument("model", help="model file (.kes.json)")
+    p.add_argument("--scene", choices=SCENES, default="sphere", help="scene (default sphere)")
+    p.add_argument("-o", "--output", required=True, help="image (.png, .jpg, .exr); with --animation .mp4 or .gif")
+    p.add_argument("--animation", metavar="DRAPE_DIR", default=None,
+                   help="render every frame of a 'kesbrdf drape' folder to a video (resumable)")
+    p.add_argument("--drape", metavar="DRAPE_DIR", default=None,
+                   help="for --scene drape/dressform: render this drape folder's frame (default: a procedural garment)")
+    p.add_argument("--frame", type=int, default=None, help="frame of --drape to render (default: the last)")
+    p.add_argument("--fps", type=float, default=None, help="animation frame rate (default: drape.json's)")
+    p.add_argument("--base-color", default=None, metavar="R,G,B",
+                   help="body colour: Lambertian albedo of the dyed fabric, each in [0,1] (default: measured body)")
+    p.add_argument("--uv-rotation", type=float, default=0.0, metavar="DEG",
+                   help="swatch only: turn the UVs (90 puts the warp along the other edge)")
+    add_render_options(p)
+
+
+def run(args) -> int:
+    from kesbrdf.render import animation, scenes  # noqa: F401  (registers the BSDF)
+
+    base = parse_rgb_flag(args.base_color, "--base-color")
+    if base is not None and max(base) > 1:
+        raise KesbrdfError(f"--base-color: expected a body albedo with R,G,B in [0, 1], got {args.base_color!r}")
+    opts = render_options(args, base_color=base,
+                          uv_rotation_deg=args.uv_rotation)
+    if args.animation:
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+        scene = args.scene if args.scene in ("drape", "dressform") else None
+        with Progress(TextColumn("rendering frames"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                      transient=True) as bar:
+            task = bar.add_task("frames", total=None)
+            kept = []
+
+            def progress(done, total, skipped):
+                bar.update(task, completed=done, total=total)
+                if skipped:
+                    kept.append(done)
+
+            out = animation.render_animation(args.model, args.animation, args.output, opts, scene=scene,
+                                             fps=args.fps, progress=progress)
+        note = f" ({len(kept)} frame(s) kept from an earlier run)" if kept else ""
+        stderr(f"wrote {out}{note}")
+        return 0
+    if args.output.lower().endswith((".mp4", ".gif")):
+        raise KesbrdfError(f"{args.output}: video output needs --animation DRAPE_DIR")
+    stderr(f"rendering {args.scene} at {opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
+    out = scenes.render_still(args.model, args.scene, args.output, opts, drape=args.drape, frame=args.frame)
+    stderr(f"wrote {out}")
+    return 0

@@ -1,0 +1,304 @@
+r"""The ``kesbrdf`` BSDF: an extended-KES model file as a Mitsuba 3 plugin.
+
+Evaluation follows ``docs/formats.md`` ("How to evaluate a model") exactly, in
+Dr.Jit (single precision), so it agrees with :func:`kesbrdf.brdf.evaluate`:
+
+.. math::
+
+    f_r(\omega_i, \omega_r) = c + t\,\frac{q(\phi, \gamma)}{\sqrt{\cos\theta_i\cos\theta_r}}
+
+with (φ, γ) from the ``deviation`` or ``halfvector`` mapping (DESIGN §4), q read by
+bilinear lookup (φ periodic, γ clamped to the measured range; a ``mi.Texture2f``
+whose first φ row is repeated after the last, so clamping equals periodic
+wrapping), c the body term and t the lobe tint.
+
+Frames (DESIGN §7).  Mitsuba's local shading frame is (s, t, n) with s the
+normalised UV-u tangent ∂p/∂u, so **u runs along the warp (fabric x) and v along the
+weft**.  Mitsuba's ``si.wi`` points to the camera, i.e. it is the model's ω_r, and
+``wo`` points to the light, the model's ω_i.
+
+Colour (DESIGN §5).  ``base_color`` is the Lambertian albedo of the dyed body:
+c = base_color/π replaces the measured body term; unset, the measured body is used.
+``lobe_tint`` multiplies the measured lobe q (default 1: the measured sheen, which
+for a dyed satin stays nearly neutral).  Gloss and anisotropy live in q alone, so
+a colourway changes c and keeps the highlight.
+
+Parameters (scene description)
+------------------------------
+filename : str
+    A model file (``*.kes.json``, kind ``kes``).
+mapping : str
+    ``deviation`` (default) or ``halfvector``.  ``paper`` is rejected: eq. 3–4 taken
+    literally is singular (sin β → 0, grazing angles), not reciprocal, and has no
+    lobe around the mirror direction to sample; use it through :mod:`kesbrdf.brdf`.
+base_color : "r,g,b" or list of 3 floats, optional
+    Body albedo in [0, 1].
+lobe_tint : "r,g,b" or list of 3 floats, optional
+    Tint of the lobe (default 1,1,1).
+two_sided : bool
+    Default ``False``.  When true, a hit from the back side is shaded as the front
+    (the fabric frame mirrored through its plane: same warp and weft).
+sampling : str
+    ``lobe`` (default, the mixture of :mod:`kesbrdf.render.sampling`) or ``cosine``
+    (cosine-weighted only; a baseline for the benchmark).
+
+Models with one channel are used grey; three channels are taken as RGB.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from kesbrdf.errors import ModelError, where
+from kesbrdf.render import sampling as _sampling
+
+__all__ = ["KesBSDF", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
+
+MAPPINGS = ("deviation", "halfvector")
+SAMPLINGS = ("lobe", "cosine")
+#: Projected length below which the azimuth falls back to the plane of incidence
+#: (float32 counterpart of kesbrdf.brdf.AZIMUTH_EPS).
+AZIMUTH_EPS = 1e-7
+
+
+def parse_rgb(value, name: str = "colour") -> np.ndarray:
+    """Three floats from ``"r,g,b"``, a sequence, or a Mitsuba colour/vector."""
+    if isinstance(value, str):
+        parts = [p for p in value.replace(";", ",").split(",") if p.strip()]
+    else:
+        try:
+            parts = list(value)
+        except TypeError:
+            parts = [value]
+    try:
+        rgb = np.array([float(p) for p in parts], float)
+    except (TypeError, ValueError):
+        raise ModelError(f"{name}: expected three numbers R,G,B, got {value!r}") from None
+    if rgb.size == 1:
+        rgb = np.repeat(rgb, 3)
+    if rgb.size != 3 or not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
+        raise ModelError(f"{name}: expected three non-negative numbers R,G,B, got {value!r}")
+    return rgb
+
+
+def model_rgb(model, source=None):
+    """(table (n_phi, n_gamma, 3), body (3,)) of a model as RGB."""
+    if getattr(model, "kind", "kes") != "kes":
+        raise ModelError(f"{where(source)}the renderer reads models of kind 'kes', got {model.kind!r}")
+    c = model.table.shape[-1]
+    if c == 1:
+        return np.repeat(model.table, 3, axis=-1), np.repeat(model.body, 3)
+    if c == 3:
+        return model.table, model.body
+    raise ModelError(
+        f"{where(source)}the renderer needs a model with 1 (grey) or 3 (RGB) channels, "
+        f"got {c} ({', '.join(model.channels)})"
+    )
+
+
+def check_model(path, mapping: str = "deviation"):
+    """Load and check a model for the renderer before Mitsuba sees it.
+
+    Errors raised inside a plugin constructor reach Python as Mitsuba's RuntimeError
+    with a traceback; checking first gives the CLI a one-line ModelError.
+    """
+    from kesbrdf.model import load
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(2, "No such file or directory", str(path))
+    if mapping not in MAPPINGS:
+        raise ModelError(f"unknown mapping {mapping!r}; the renderer supports {', '.join(MAPPINGS)}")
+    model = load(path)
+    model_rgb(model, path)
+    return model
+
+
+def _prop(props, name, default=None):
+    return props[name] if name in props else default
+
+
+class KesBSDF(mi.BSDF):
+    """Mitsuba BSDF evaluating and sampling a kesbrdf model (module docstring)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        from kesbrdf.model import load
+
+        filename = _prop(props, "filename")
+        if filename is None:
+            raise ModelError("kesbrdf BSDF: expected a 'filename' parameter (a model file), got none")
+        path = Path(str(filename))
+        model = load(path)
+        self.filename = str(path)
+        mapping = str(_prop(props, "mapping", "deviation"))
+        if mapping not in MAPPINGS:
+            extra = (
+                " ('paper' is singular and not reciprocal; render with deviation or halfvector, "
+                "see docs/rendering.md)"
+                if mapping == "paper"
+                else ""
+            )
+            raise ModelError(
+                f"kesbrdf BSDF: unknown mapping {mapping!r}; expected one of {', '.join(MAPPINGS)}{extra}"
+            )
+        self.mapping = mapping
+        sampling = str(_prop(props, "sampling", "lobe"))
+        if sampling not in SAMPLINGS:
+            raise ModelError(f"kesbrdf BSDF: unknown sampling {sampling!r}; expected one of {', '.join(SAMPLINGS)}")
+        self.two_sided = bool(_prop(props, "two_sided", False))
+
+        table, body = model_rgb(model, path)
+        tint = parse_rgb(_prop(props, "lobe_tint", "1,1,1"), "lobe_tint")
+        base = _prop(props, "base_color")
+        if base is not None:
+            albedo = parse_rgb(base, "base_color")
+            if np.any(albedo > 1):
+                raise ModelError(f"base_color: expected a body albedo with R,G,B in [0, 1], got {base!r}")
+            body = albedo / math.pi
+        self.base_color = None if base is None else parse_rgb(base, "base_color")
+        self.lobe_tint = tint
+        table = np.clip(np.nan_to_num(table * tint), 0.0, None)
+
+        n_phi, n_gamma = table.shape[:2]
+        self.n_phi, self.n_gamma = n_phi, n_gamma
+        self.gamma_max = float(model.gamma_grid[-1])
+        self.dgamma = float(model.gamma_grid[1] - model.gamma_grid[0])
+        padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
+        self.texture = mi.Texture2f(
+            mi.TensorXf(padded),
+            use_accel=False,
+            filter_mode=dr.FilterMode.Linear,
+            wrap_mode=dr.WrapMode.Clamp,
+        )
+        self.body = mi.Color3f(*[float(b) for b in body])
+
+        q_mean = table.mean(axis=-1)
+        if sampling == "cosine":
+            weight = 0.0
+        else:
+            lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, model.gamma_grid)
+            diffuse = math.pi * float(np.mean(body))
+            share = lobe / (lobe + diffuse) if lobe + diffuse > 0 else 0.5
+            weight = min(max(share, _sampling.MIN_LOBE_WEIGHT), _sampling.MAX_LOBE_WEIGHT)
+        self.sampling = sampling
+        self.sampler = _sampling.LobeSampler(
+            _sampling.lobe_density_table(q_mean, model.gamma_grid, mapping),
+            self.gamma_max,
+            mapping,
+            weight,
+        )
+
+        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
+        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        if self.two_sided:
+            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
+            flags_body = flags_body | mi.BSDFFlags.BackSide
+        self.m_components = [flags_lobe, flags_body]
+        self.m_flags = flags_lobe | flags_body
+
+    # -- evaluation ------------------------------------------------------------
+    def _phi_gamma(self, wi, wr):
+        """(φ, γ) of light ω_i and viewer ω_r, formats.md step 1."""
+        plane = wr - wi
+        if self.mapping == "deviation":
+            m = mi.Vector3f(-wi.x, -wi.y, wi.z)
+            gamma = dr.atan2(dr.norm(dr.cross(wr, m)), dr.dot(wr, m))
+            s = wi + wr
+        else:
+            s = wi + wr
+            gamma = 2.0 * dr.atan2(dr.norm(mi.Vector2f(s.x, s.y)), s.z)
+        small = dr.norm(mi.Vector2f(s.x, s.y)) < AZIMUTH_EPS
+        x = dr.select(small, plane.x, s.x)
+        y = dr.select(small, plane.y, s.y)
+        phi = dr.atan2(y, x)
+        phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
+        return phi, gamma
+
+    def lobe_q(self, phi, gamma):
+        """Bilinear table lookup q(φ, γ) → Color3f (formats.md step 2)."""
+        u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
+        v = dr.clip(gamma, 0.0, self.gamma_max) * (1.0 / self.dgamma)
+        v = dr.clip(v, 0.0, float(self.n_gamma - 1))
+        pos = mi.Point2f((v + 0.5) / self.n_gamma, (u + 0.5) / (self.n_phi + 1))
+        r, g, b = self.texture.eval(pos)
+        return mi.Color3f(r, g, b)
+
+    def f_r(self, wi, wr, active=True):
+        """f_r (1/sr, no cosine) for light ω_i and viewer ω_r in the fabric frame."""
+        cos_i = wi.z
+        cos_r = wr.z
+        above = (cos_i > 0.0) & (cos_r > 0.0) & active
+        phi, gamma = self._phi_gamma(wi, wr)
+        q = self.lobe_q(phi, gamma)
+        norm = dr.rsqrt(dr.maximum(cos_i * cos_r, 1e-20))
+        f = self.body + q * norm
+        return dr.select(above, f, 0.0)
+
+    def _orient(self, si, wo):
+        """Fabric-frame (ω_r, ω_i) with the back side mirrored when two-sided."""
+        wr = mi.Vector3f(si.wi)
+        wi = mi.Vector3f(wo)
+        if self.two_sided:
+            back = wr.z < 0.0
+            wr.z = dr.select(back, -wr.z, wr.z)
+            wi.z = dr.select(back, -wi.z, wi.z)
+        return wr, wi
+
+    def eval(self, ctx, si, wo, active=True):
+        wr, wi = self._orient(si, wo)
+        f = self.f_r(wi, wr, active)
+        return dr.select(active, f * dr.maximum(wi.z, 0.0), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        wr, wi = self._orient(si, wo)
+        ok = active & (wr.z > 0.0) & (wi.z > 0.0)
+        return dr.select(ok, self.sampler.pdf(wr, wi), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        wr = mi.Vector3f(si.wi)
+        back = wr.z < 0.0
+        if self.two_sided:
+            wr.z = dr.select(back, -wr.z, wr.z)
+        wi, pdf, from_lobe = self.sampler.sample(wr, sample1, sample2)
+        ok = active & (wr.z > 0.0) & (wi.z > 0.0) & (pdf > 0.0)
+        f = self.f_r(wi, wr, ok) * wi.z
+        weight = dr.select(ok, f / dr.maximum(pdf, 1e-30), 0.0)
+        wo = mi.Vector3f(wi)
+        if self.two_sided:
+            wo.z = dr.select(back, -wo.z, wo.z)
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = wo
+        bs.pdf = dr.select(ok, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = dr.select(
+            from_lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        )
+        bs.sampled_component = dr.select(from_lobe, mi.UInt32(0), mi.UInt32(1))
+        return bs, weight
+
+    def traverse(self, callback):
+        pass
+
+    def parameters_changed(self, keys):
+        pass
+
+    def to_string(self):
+        return (
+            f"KesBSDF[filename={self.filename!r}, mapping={self.mapping!r}, two_sided={self.two_sided}, "
+            f"sampling={self.sampling!r}, lobe_weight={self.sampler.lobe_weight:.3f}]"
+        )
+
+
+def register() -> None:
+    """Register the plugin under the name ``kesbrdf`` (idempotent)."""
+    mi.register_bsdf("kesbrdf", lambda props: KesBSDF(props))

@@ -1,0 +1,110 @@
+"""A contact sheet of one garment in several colourways (DESIGN §5).
+
+Every tile uses the same model, scene, light and camera; only ``base_color`` (the
+Lambertian albedo of the dyed body) changes, so the measured lobe, which carries the
+gloss and the anisotropy, is identical in every tile.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from kesbrdf._atomic import atomic_path
+from kesbrdf.errors import KesbrdfError
+from kesbrdf.render import scenes as _scenes
+
+__all__ = ["DEFAULT_COLOURWAYS", "parse_colourways", "render_colourways", "MIN_COLOURWAYS"]
+
+#: Body albedos (linear RGB) of the default colourways.
+DEFAULT_COLOURWAYS: list[tuple[str, tuple[float, float, float]]] = [
+    ("ivory", (0.80, 0.74, 0.62)),
+    ("crimson", (0.50, 0.02, 0.05)),
+    ("emerald", (0.02, 0.32, 0.13)),
+    ("navy", (0.02, 0.04, 0.22)),
+    ("gold", (0.72, 0.45, 0.06)),
+    ("plum", (0.28, 0.04, 0.22)),
+    ("teal", (0.02, 0.28, 0.30)),
+    ("black", (0.015, 0.015, 0.015)),
+]
+MIN_COLOURWAYS = 6
+
+
+def parse_colourways(text: str) -> list[tuple[str, tuple[float, float, float]]]:
+    """``"name=r,g,b;name=r,g,b;..."`` → list of (name, rgb)."""
+    from kesbrdf.render.bsdf import parse_rgb
+
+    out = []
+    for k, item in enumerate(t for t in text.split(";") if t.strip()):
+        name, sep, rgb = item.partition("=")
+        if not sep:
+            name, rgb = f"colour {k + 1}", item
+        albedo = parse_rgb(rgb, f"colourway {name.strip()!r}")
+        if albedo.max() > 1:
+            raise KesbrdfError(f"colourway {name.strip()!r}: expected a body albedo with R,G,B in [0, 1], got {rgb!r}")
+        out.append((name.strip(), tuple(float(c) for c in albedo)))
+    return out
+
+
+def render_colourways(model_path, output, opts: "_scenes.RenderOptions", scene: str = "dressform", drape=None,
+                      colourways=None, columns: int = 4, progress=None) -> Path:
+    """Render ``scene`` once per colourway and write a labelled contact sheet (PNG).
+
+    Parameters
+    ----------
+    colourways : list of (name, (r, g, b)), optional
+        At least :data:`MIN_COLOURWAYS`; default :data:`DEFAULT_COLOURWAYS`.
+    progress : callable(done, total, name), optional
+    """
+    from PIL import Image, ImageDraw
+    from PIL.PngImagePlugin import PngInfo
+
+    colourways = list(colourways or DEFAULT_COLOURWAYS)
+    if len(colourways) < MIN_COLOURWAYS:
+        raise KesbrdfError(f"colourways: expected at least {MIN_COLOURWAYS} colours, got {len(colourways)}")
+    model_path = Path(model_path)
+    if not model_path.is_file():
+        raise FileNotFoundError(2, "No such file or directory", str(model_path))
+    if isinstance(drape, (str, Path)):
+        drape = _scenes.read_drape(drape)
+    tiles = []
+    for k, (name, rgb) in enumerate(colourways):
+        o = replace(opts, base_color=tuple(rgb))
+        img = _scenes.render_scene(_scenes.load_scene(model_path, scene, o, drape=drape), o)
+        tile = Image.fromarray(_scenes.to_srgb8(img, opts.exposure))
+        draw = ImageDraw.Draw(tile)
+        label = f"{name}  ({', '.join(f'{c:.2f}' for c in rgb)})"
+        draw.rectangle([0, tile.height - 16, tile.width, tile.height], fill=(0, 0, 0))
+        draw.text((4, tile.height - 14), label, fill=(235, 235, 235))
+        tiles.append(tile)
+        if progress is not None:
+            progress(k + 1, len(colourways), name)
+    columns = max(1, min(int(columns), len(tiles)))
+    rows = -(-len(tiles) // columns)
+    w, h = tiles[0].size
+    sheet = Image.new("RGB", (columns * w, rows * h), (20, 20, 20))
+    for k, tile in enumerate(tiles):
+        sheet.paste(tile, ((k % columns) * w, (k // columns) * h))
+    meta = _scenes.provenance(model_path, scene, opts, drape)
+    meta["colourways"] = [{"name": n, "base_color": list(c)} for n, c in colourways]
+    info = PngInfo()
+    info.add_text("kesbrdf", json.dumps(meta, default=str))
+    output = Path(output)
+    if output.suffix.lower() != ".png":
+        raise KesbrdfError(f"colourways: expected an output file ending .png, got {output.name!r}")
+    with atomic_path(output) as tmp:
+        sheet.save(tmp, format="PNG", pnginfo=info)
+    return output
+
+
+def tile_means(sheet_path, n: int, columns: int = 4) -> np.ndarray:
+    """Mean linear-ish sRGB colour of each tile of a sheet (for checks), shape (n, 3)."""
+    from PIL import Image
+
+    a = np.asarray(Image.open(sheet_path).convert("RGB"), float) / 255
+    rows = -(-n // columns)
+    h, w = a.shape[0] // rows, a.shape[1] // min(columns, n)
+    return np.array([a[(k // columns) * h:(k // columns + 1) * h - 16, (k % columns) * w:(k % columns + 1) * w].reshape(-1, 3).mean(0) for k in range(n)])

@@ -1,0 +1,457 @@
+"""Scenes for rendering a kesbrdf model, written as Mitsuba scene dicts (``mi.load_dict``).
+
+Scenes (``SCENES``):
+
+``sphere``
+    A sphere with the fabric BSDF over a grey floor.  Mitsuba's sphere has u along
+    the longitude (around its axis, here the world's up), so the warp runs around it.
+``swatch``
+    A flat square of fabric seen from above at an angle, u (warp) along world x.
+    ``uv_rotation_deg=90`` turns the UVs so the warp runs along world z.
+``drape``
+    A drape folder from ``kesbrdf drape`` (one frame and its colliders); without a
+    folder, a procedurally folded sheet over a dome.
+``dressform``
+    A dress form built from primitives (ellipsoid torso, neck, pole, base) wearing a
+    garment: the drape folder's frame when given, else a procedural flared skirt.
+
+Lighting needs no downloads (``ENVIRONMENTS``, ``LIGHTS``): a generated latitude–
+longitude map (``sky``: gradient sky with a sun; ``studio``: dark room with two soft
+boxes; ``uniform``: constant white, the furnace) and/or a rectangular area light or a
+directional sun.  World space is y-up; drape folders written z-up (``"up_axis": "z"`` in
+drape.json, or guessed from the direction the cloth falls) are rotated on load.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from kesbrdf.errors import FormatError, KesbrdfError, where
+from kesbrdf.render import mesh as _mesh
+
+__all__ = [
+    "SCENES",
+    "ENVIRONMENTS",
+    "LIGHTS",
+    "RenderOptions",
+    "Drape",
+    "read_drape",
+    "bsdf_dict",
+    "load_scene",
+    "render_scene",
+    "to_srgb8",
+    "save_image",
+    "render_still",
+]
+
+SCENES = ("sphere", "swatch", "drape", "dressform")
+ENVIRONMENTS = ("studio", "sky", "uniform", "none")
+LIGHTS = ("area", "sun", "none")
+#: Diffuse albedo of floors and dress forms.
+PROP_ALBEDO = (0.42, 0.42, 0.42)
+#: Vertical field of view of the camera, degrees.
+FOV_DEG = 32.0
+
+
+@dataclass
+class RenderOptions:
+    """Everything that sets up a render besides the model and the scene name."""
+
+    spp: int = 32
+    resolution: tuple[int, int] = (320, 240)
+    light: str = "area"
+    env: str = "studio"
+    base_color: tuple | None = None
+    lobe_tint: tuple | None = None
+    mapping: str = "deviation"
+    two_sided: bool = True
+    sampling: str = "lobe"
+    max_depth: int = 4
+    seed: int = 0
+    uv_rotation_deg: float = 0.0
+    exposure: float = 0.0
+    floor: bool = True
+    integrator: dict | None = field(default=None, repr=False)
+
+    def validate(self) -> "RenderOptions":
+        if self.env not in ENVIRONMENTS:
+            raise KesbrdfError(f"unknown environment {self.env!r}; expected one of {', '.join(ENVIRONMENTS)}")
+        if self.light not in LIGHTS:
+            raise KesbrdfError(f"unknown light {self.light!r}; expected one of {', '.join(LIGHTS)}")
+        w, h = self.resolution
+        if not (int(w) > 0 and int(h) > 0 and int(self.spp) > 0):
+            raise KesbrdfError(f"expected positive resolution and spp, got {w}x{h} and {self.spp}")
+        return self
+
+    def to_json(self) -> dict:
+        d = asdict(self)
+        d.pop("integrator")
+        return d
+
+
+# -- drape folders -------------------------------------------------------------------
+@dataclass
+class Drape:
+    """A drape folder (``kesbrdf drape`` output)."""
+
+    root: Path
+    fps: float
+    frames: list[Path]
+    colliders: list[Path]
+    scene: str
+    up_axis: str
+
+
+def read_drape(path) -> Drape:
+    """Read ``drape.json`` of a drape folder; errors name the file."""
+    root = Path(path)
+    meta_path = root / "drape.json"
+    if not meta_path.is_file():
+        raise FormatError(f"{where(root)}expected a drape folder with drape.json, got none")
+    try:
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as exc:
+        raise FormatError(f"{where(meta_path, exc.lineno)}expected JSON, got {exc.msg}") from None
+    frames = [root / str(f) for f in meta.get("frames", [])]
+    if not frames:
+        raise FormatError(f"{where(meta_path)}expected a non-empty 'frames' list, got {meta.get('frames')!r}")
+    missing = [str(f) for f in frames if not f.is_file()]
+    if missing:
+        raise FormatError(f"{where(meta_path)}frame file(s) missing: {', '.join(missing[:3])}")
+    colliders = []
+    for c in meta.get("colliders", []):
+        name = c.get("file") if isinstance(c, dict) else c
+        colliders.append(root / str(name))
+    up = str(meta.get("up_axis") or _guess_up_axis(frames[0], frames[-1])).lower()
+    if up not in ("y", "z"):
+        raise FormatError(f"{where(meta_path)}expected up_axis 'y' or 'z', got {up!r}")
+    return Drape(root, float(meta.get("fps", 24.0)), frames, colliders, str(meta.get("scene", "sphere")), up)
+
+
+def _centroid(path) -> np.ndarray:
+    shape = mi.load_dict({"type": "ply", "filename": str(path)})
+    return np.array(mi.traverse(shape)["vertex_positions"]).reshape(-1, 3).mean(axis=0)
+
+
+def _guess_up_axis(first, last) -> str:
+    """Up axis of a drape without ``up_axis``: the cloth falls, so its centroid moves
+    down along it from the first to the last frame; newton's default ``z`` when unclear."""
+    if first == last:
+        return "z"
+    move = _centroid(last) - _centroid(first)
+    axis = int(np.argmin(move))
+    if move[axis] < -2 * np.abs(np.delete(move, axis)).max() and axis in (1, 2):
+        return "yz"[axis - 1]
+    return "z"
+
+
+# -- pieces of scene dicts ----------------------------------------------------------
+def bsdf_dict(model_path, opts: RenderOptions) -> dict:
+    """The ``kesbrdf`` BSDF entry for a model file and the colour options."""
+    d = {
+        "type": "kesbrdf",
+        "filename": str(model_path),
+        "mapping": opts.mapping,
+        "two_sided": bool(opts.two_sided),
+        "sampling": opts.sampling,
+    }
+    if opts.base_color is not None:
+        d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
+    if opts.lobe_tint is not None:
+        d["lobe_tint"] = ",".join(f"{float(c):.6g}" for c in opts.lobe_tint)
+    return d
+
+
+def _diffuse(rgb=PROP_ALBEDO) -> dict:
+    return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(rgb)}}
+
+
+def environment_bitmap(kind: str, width: int = 256) -> np.ndarray:
+    """Generated lat-long radiance map (H = width/2, W, 3), y-up, row 0 at the zenith."""
+    h = width // 2
+    theta = (np.arange(h) + 0.5) / h * math.pi  # from +y
+    phi = (np.arange(width) + 0.5) / width * 2 * math.pi
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    # direction (Mitsuba's envmap: u = atan2(x, -z) / 2π, v = θ / π)
+    d = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
+    if kind == "uniform":
+        return np.ones((h, width, 3), np.float32)
+    if kind == "sky":
+        elev = np.clip(d[..., 1], -1, 1)
+        zenith = np.array([0.18, 0.32, 0.75])
+        horizon = np.array([0.85, 0.85, 0.9])
+        ground = np.array([0.12, 0.11, 0.1])
+        t = np.clip(elev, 0, 1)[..., None] ** 0.5
+        img = np.where(elev[..., None] > 0, horizon * (1 - t) + zenith * t, ground)
+        sun = np.array([math.cos(math.radians(40)) * 0.6, math.sin(math.radians(40)), math.cos(math.radians(40)) * 0.8])
+        cos_s = d @ (sun / np.linalg.norm(sun))
+        img = img + np.array([30.0, 27.0, 22.0]) * np.exp((cos_s - 1) / 0.0015)[..., None]
+        return img.astype(np.float32)
+    # studio: dark room, a large overhead soft box and a strip at the side
+    img = np.full((h, width, 3), 0.04)
+    overhead = np.exp(-((d[..., 1] - 1) ** 2) / 0.02) * 2.5
+    strip_dir = np.array([-0.8, 0.35, 0.5])
+    strip_dir /= np.linalg.norm(strip_dir)
+    strip = np.exp(-(((d[..., 1] - 0.35) / 0.35) ** 2)) * np.exp(-((d @ strip_dir - 1) ** 2) / 0.05) * 3.0
+    img = img + (overhead + strip)[..., None] * np.array([1.0, 0.98, 0.95])
+    return img.astype(np.float32)
+
+
+def _lights(opts: RenderOptions, center, radius, key_dir=(0.45, 0.72, 0.6)) -> dict:
+    out = {}
+    if opts.env != "none":
+        out["environment"] = {"type": "envmap", "bitmap": mi.Bitmap(environment_bitmap(opts.env))}
+    if opts.light == "area":
+        c = np.asarray(center)
+        key_dir = np.asarray(key_dir, float) / np.linalg.norm(key_dir)
+        origin = c + 3.6 * radius * key_dir
+        size = 0.6 * radius
+        out["key_light"] = {
+            "type": "rectangle",
+            "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=c.tolist(), up=[0, 1, 0])
+            @ mi.ScalarTransform4f().scale([size, size, 1.0]),
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [9.0, 8.8, 8.4]}},
+        }
+    elif opts.light == "sun":
+        out["sun"] = {
+            "type": "directional",
+            "direction": [-0.45, -0.75, -0.5],
+            "irradiance": {"type": "rgb", "value": [3.0, 2.9, 2.7]},
+        }
+    return out
+
+
+def _camera(opts: RenderOptions, center, radius, direction=(0.0, 0.55, 1.0)) -> dict:
+    w, h = (int(v) for v in opts.resolution)
+    direction = np.asarray(direction, float)
+    direction /= np.linalg.norm(direction)
+    fov = FOV_DEG if w >= h else FOV_DEG * w / h
+    dist = 0.95 * radius / math.sin(math.radians(fov) / 2)
+    origin = np.asarray(center) + dist * direction
+    return {
+        "type": "perspective",
+        "fov": fov,
+        "fov_axis": "y" if w >= h else "x",
+        "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=list(map(float, center)), up=[0, 1, 0]),
+        "film": {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgb", "rfilter": {"type": "gaussian"}},
+        "sampler": {"type": "independent", "sample_count": int(opts.spp), "seed": int(opts.seed)},
+    }
+
+
+def _ply_shape(path, bsdf: dict, up_axis: str = "y") -> "mi.Shape":
+    d = {"type": "ply", "filename": str(path), "bsdf": bsdf}
+    if up_axis == "z":
+        d["to_world"] = mi.ScalarTransform4f().rotate([1, 0, 0], -90)
+    return mi.load_dict(d)
+
+
+def _mesh_shape(workdir: Path, name: str, mesh, bsdf: dict) -> "mi.Shape":
+    path = workdir / f"{name}.ply"
+    _mesh.write_ply(path, *mesh)
+    return _ply_shape(path, bsdf)
+
+
+def _bbox(shapes):
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    for s in shapes:
+        b = s.bbox()
+        lo = np.minimum(lo, np.array(b.min, float).ravel())
+        hi = np.maximum(hi, np.array(b.max, float).ravel())
+    return lo, hi
+
+
+def _dressform_props(workdir: Path) -> dict:
+    """A dress form from primitives: ellipsoid torso, neck, pole and base (y-up)."""
+    grey = _diffuse((0.55, 0.52, 0.48))
+    dark = _diffuse((0.08, 0.08, 0.08))
+    T = mi.ScalarTransform4f
+    return {
+        "torso": _mesh_shape(workdir, "torso", _mesh.ellipsoid((0, 1.2, 0), (0.17, 0.3, 0.12)), grey),
+        "hips": _mesh_shape(workdir, "hips", _mesh.ellipsoid((0, 0.98, 0), (0.175, 0.1, 0.13)), grey),
+        "neck": {
+            "type": "cylinder", "p0": [0, 1.42, 0], "p1": [0, 1.56, 0], "radius": 0.045, "bsdf": grey,
+        },
+        "pole": {"type": "cylinder", "p0": [0, 0.02, 0], "p1": [0, 0.95, 0], "radius": 0.015, "bsdf": dark},
+        "base": {"type": "disk", "to_world": T().translate([0, 0.02, 0]) @ T().rotate([1, 0, 0], -90) @ T().scale(0.22), "bsdf": dark},
+    }
+
+
+def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: int | None = None,
+               cloth_bsdf: dict | None = None, framing=None) -> "mi.Scene":
+    """Build and load one scene.
+
+    Parameters
+    ----------
+    model_path : path
+        Model file for the fabric BSDF (ignored when ``cloth_bsdf`` is given).
+    scene : {"sphere", "swatch", "drape", "dressform"}
+    opts : RenderOptions
+    drape : Drape or path, optional
+        Drape folder for ``drape``/``dressform``; its frame ``frame`` (default: last).
+    cloth_bsdf : dict, optional
+        Replace the fabric BSDF (benchmarks compare with Mitsuba's own BSDFs).
+    framing : (center, radius), optional
+        Fix the camera (animations keep one framing for every frame).
+    """
+    if scene not in SCENES:
+        raise KesbrdfError(f"unknown scene {scene!r}; expected one of {', '.join(SCENES)}")
+    opts.validate()
+    if cloth_bsdf is None:
+        from kesbrdf.render.bsdf import check_model
+
+        check_model(model_path, opts.mapping)
+    bsdf = cloth_bsdf if cloth_bsdf is not None else bsdf_dict(model_path, opts)
+    if isinstance(drape, (str, Path)):
+        drape = read_drape(drape)
+    shapes: dict = {}
+    extra: dict = {}
+    floor = True
+    view_dir = (0.0, 0.55, 1.0)
+    key_dir = (0.45, 0.72, 0.6)
+    with tempfile.TemporaryDirectory(prefix="kesbrdf-render-") as tmp:
+        workdir = Path(tmp)
+        if scene == "sphere":
+            T = mi.ScalarTransform4f
+            shapes["cloth"] = mi.load_dict({
+                "type": "sphere",
+                "to_world": T().translate([0, 1, 0]) @ T().rotate([1, 0, 0], -90),
+                "bsdf": bsdf,
+            })
+        elif scene == "swatch":
+            p, n, uv, f = _mesh.swatch(size=1.0)
+            shapes["cloth"] = _mesh_shape(workdir, "swatch", (p, n, _mesh.rotate_uv(uv, opts.uv_rotation_deg), f), bsdf)
+            floor = False
+            view_dir = (0.0, 1.0, 0.75)
+            key_dir = (0.0, 1.0, -0.75)  # mirror of the camera: the highlight sits mid-swatch
+        elif drape is not None:
+            index = len(drape.frames) - 1 if frame is None else int(frame)
+            if not 0 <= index < len(drape.frames):
+                raise KesbrdfError(f"{where(drape.root)}expected a frame index in [0, {len(drape.frames) - 1}], got {frame}")
+            shapes["cloth"] = _ply_shape(drape.frames[index], bsdf, drape.up_axis)
+            for k, c in enumerate(drape.colliders):
+                if c.is_file():
+                    shapes[f"collider_{k}"] = _ply_shape(c, _diffuse((0.5, 0.48, 0.45)), drape.up_axis)
+        elif scene == "drape":
+            shapes["cloth"] = _mesh_shape(workdir, "folded", _mesh.folded_cloth(), bsdf)
+        else:  # dressform with a procedural skirt
+            shapes["cloth"] = _mesh_shape(workdir, "skirt", _mesh.skirt(top=1.0), bsdf)
+        if scene == "dressform" and drape is None:
+            extra.update(_dressform_props(workdir))
+        lo, hi = _bbox(shapes.values())
+        floor_y = float(lo[1])
+        if scene == "dressform" and drape is None:
+            floor_y = 0.0  # the stand's base
+            # frame the garment and the torso above it, not the whole stand
+            lo = np.minimum(lo, [-0.2, 0.4, -0.2])
+            hi = np.maximum(hi, [0.2, 1.45, 0.2])
+        if framing is None:
+            center = 0.5 * (lo + hi)
+            radius = 0.5 * float(np.linalg.norm(hi - lo))
+        else:
+            center, radius = framing
+        d = {"type": "scene"}
+        d.update(shapes)
+        d.update(extra)
+        if floor and opts.floor:
+            T = mi.ScalarTransform4f
+            d["floor"] = {
+                "type": "rectangle",
+                "to_world": T().translate([float(center[0]), floor_y - 1e-3, float(center[2])])
+                @ T().rotate([1, 0, 0], -90)
+                @ T().scale(max(8 * radius, 12.0)),
+                "bsdf": _diffuse(),
+            }
+        d.update(_lights(opts, center, radius, key_dir))
+        d["sensor"] = _camera(opts, center, radius, view_dir)
+        d["integrator"] = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
+        return mi.load_dict(d)
+
+
+def scene_framing(drape: Drape):
+    """(center, radius) in y-up world covering the first and last frames and colliders."""
+    shapes = [_ply_shape(p, _diffuse(), drape.up_axis) for p in (drape.frames[0], drape.frames[-1])]
+    shapes += [_ply_shape(c, _diffuse(), drape.up_axis) for c in drape.colliders if c.is_file()]
+    lo, hi = _bbox(shapes)
+    return 0.5 * (lo + hi), 0.5 * float(np.linalg.norm(hi - lo))
+
+
+def render_scene(scene: "mi.Scene", opts: RenderOptions) -> np.ndarray:
+    """Render to a linear RGB float array (H, W, 3)."""
+    img = mi.render(scene, spp=int(opts.spp), seed=int(opts.seed))
+    dr.eval(img)
+    return np.array(img, dtype=np.float32)[..., :3]
+
+
+def to_srgb8(img: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear RGB → 8-bit sRGB (clipped), with exposure in stops."""
+    x = np.clip(np.nan_to_num(img) * (2.0 ** exposure), 0, 1)
+    s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
+    return (s * 255 + 0.5).astype(np.uint8)
+
+
+def save_image(path, img: np.ndarray, metadata: dict | None = None, exposure: float = 0.0) -> Path:
+    """Write a render atomically: ``.exr`` linear, ``.png``/``.jpg`` sRGB 8-bit.
+
+    PNG files carry ``metadata`` as JSON in a ``kesbrdf`` text chunk.
+    """
+    from PIL import Image
+    from PIL.PngImagePlugin import PngInfo
+
+    from kesbrdf._atomic import atomic_path
+
+    path = Path(path)
+    ext = path.suffix.lower()
+    with atomic_path(path) as tmp:
+        if ext == ".exr":
+            mi.Bitmap(np.ascontiguousarray(img, np.float32)).write(str(tmp), mi.Bitmap.FileFormat.OpenEXR)
+        elif ext in (".png", ".jpg", ".jpeg"):
+            im = Image.fromarray(to_srgb8(img, exposure))
+            if ext == ".png":
+                info = PngInfo()
+                if metadata:
+                    info.add_text("kesbrdf", json.dumps(metadata, default=str))
+                im.save(tmp, format="PNG", pnginfo=info)
+            else:
+                im.save(tmp, format="JPEG", quality=92)
+        else:
+            raise KesbrdfError(f"{where(path)}expected an image file ending .png, .jpg or .exr, got {ext or 'no suffix'!r}")
+    return path
+
+
+def provenance(model_path, scene: str, opts: RenderOptions, drape=None) -> dict:
+    """What an output records: version, model hash, scene and options."""
+    import hashlib
+
+    from kesbrdf._version import __version__
+
+    digest = hashlib.sha256(Path(model_path).read_bytes()).hexdigest() if model_path else None
+    return {
+        "kesbrdf_version": __version__,
+        "model": str(model_path),
+        "model_sha256": digest,
+        "scene": scene,
+        "drape": str(drape.root) if isinstance(drape, Drape) else (str(drape) if drape else None),
+        "options": opts.to_json(),
+    }
+
+
+def render_still(model_path, scene: str, output, opts: RenderOptions, drape=None, frame: int | None = None) -> Path:
+    """Render one image of ``scene`` to ``output`` (PNG/JPEG/EXR) and return its path."""
+    model_path = Path(model_path)
+    if not model_path.is_file():
+        raise FileNotFoundError(2, "No such file or directory", str(model_path))
+    if isinstance(drape, (str, Path)):
+        drape = read_drape(drape)
+    sc = load_scene(model_path, scene, opts, drape=drape, frame=frame)
+    img = render_scene(sc, opts)
+    return save_image(output, img, provenance(model_path, scene, opts, drape), opts.exposure)
