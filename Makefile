@@ -4,8 +4,8 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 OUT ?= out/demo
-LLVM := $(firstword $(wildcard /usr/lib/x86_64-linux-gnu/libLLVM-19.so /usr/lib/aarch64-linux-gnu/libLLVM-19.so))
-export DRJIT_LIBLLVM_PATH ?= $(LLVM)
+# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, DESIGN §7): Debian's libllvm19, installed by `make system`.
+export DRJIT_LIBLLVM_PATH ?= /usr/lib/$(shell uname -m)-linux-gnu/libLLVM-19.so
 export MPLBACKEND ?= Agg
 
 .PHONY: all demo test test-py test-web bench system venv viewer clean
