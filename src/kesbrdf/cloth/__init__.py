@@ -1,0 +1,15 @@
+"""Dressing simulation (the paper's application): cloth draped with newton's XPBD.
+
+* :mod:`kesbrdf.cloth.drape`: :func:`simulate_drape` (resumable, atomic frames);
+* :mod:`kesbrdf.cloth.scenes`: the satin sheet, the skirt, the sphere and the dress form;
+* :mod:`kesbrdf.cloth.ply`: binary PLY meshes (x y z nx ny nz u v) for Mitsuba 3.
+
+Only :mod:`~kesbrdf.cloth.drape` needs the optional ``newton`` / ``warp-lang``
+packages (``pip install kesbrdf[cloth]``), and only once a simulation starts.
+"""
+
+from kesbrdf.cloth.drape import SCENES, DrapeError, DrapeParameters, simulate_drape
+from kesbrdf.cloth.ply import PlyMesh, read_ply, vertex_normals, write_ply
+
+__all__ = ["SCENES", "DrapeError", "DrapeParameters", "simulate_drape", "PlyMesh", "read_ply", "write_ply",
+           "vertex_normals"]
