@@ -119,13 +119,15 @@ def _renders(out: Path, model_path: Path, say) -> None:
         return
     from kesbrdf.render import demo as render_demo
 
-    drape_dir = None
+    drape_dir = garment_dir = None
     if _have("newton") and _have("kesbrdf.cloth.drape"):
         from kesbrdf.cloth.drape import simulate_drape
 
         say("drape: satin sheet onto a sphere (newton XPBD)")
         drape_dir = simulate_drape("sphere", out / "drape", frames=40)
+        say("drape: skirt on the dress form (newton XPBD)")
+        garment_dir = simulate_drape("dressform", out / "garment", frames=30)
     else:
         say("drape skipped (install kesbrdf[cloth])")
     say("render: sphere, draped garment, animation, colourways (Mitsuba 3)")
-    render_demo.run_demo(model_path, out / "renders", drape_dir=drape_dir, progress=say)
+    render_demo.run_demo(model_path, out / "renders", drape_dir=drape_dir, garment_dir=garment_dir, progress=say)

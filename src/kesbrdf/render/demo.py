@@ -19,11 +19,14 @@ __all__ = ["run_demo", "DEMO_COLOUR"]
 DEMO_COLOUR = (0.45, 0.03, 0.06)
 
 
-def run_demo(model_path, out_dir, drape_dir=None, progress=None) -> dict:
+def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=None) -> dict:
     """Write sphere.png, drape.png, garment.png, drape.mp4 and colourways.png into ``out_dir``.
 
     ``drape_dir`` is a ``kesbrdf drape`` folder; without one a procedural drape
-    sequence stands in (written to ``out_dir/procedural_drape``).  ``progress`` is
+    sequence stands in (written to ``out_dir/procedural_drape``).  ``garment_dir`` is
+    a ``kesbrdf drape --scene dressform`` folder whose last frame dresses the form in
+    the garment still and the colourways; without one a procedural skirt stands in.
+    ``progress`` is
     called with one line of text per step.  Returns {name: path}.
     """
     say = progress or (lambda text: None)
@@ -40,8 +43,9 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None) -> dict:
     garment_scene = "dressform" if drape.scene == "dressform" else "drape"
     say(f"render: draped cloth ({drape.root})")
     written["drape"] = _scenes.render_still(model_path, garment_scene, out / "drape.png", still, drape=drape)
-    say("render: garment on the dress form")
-    written["garment"] = _scenes.render_still(model_path, "dressform", out / "garment.png", still)
+    garment = _scenes.read_drape(garment_dir) if garment_dir is not None else None
+    say("render: garment on the dress form" + (" (simulated skirt)" if garment else " (procedural skirt)"))
+    written["garment"] = _scenes.render_still(model_path, "dressform", out / "garment.png", still, drape=garment)
     anim = _scenes.RenderOptions(spp=16, resolution=(240, 180), base_color=DEMO_COLOUR, env="studio", light="area")
     say(f"render: animation of {len(drape.frames)} frames")
     written["animation"] = _animation.render_animation(
@@ -51,5 +55,7 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None) -> dict:
     )
     sheet = _scenes.RenderOptions(spp=32, resolution=(200, 240), env="studio", light="area")
     say("render: colourways")
-    written["colourways"] = _colourways.render_colourways(model_path, out / "colourways.png", sheet, scene="dressform")
+    written["colourways"] = _colourways.render_colourways(
+        model_path, out / "colourways.png", sheet, scene="dressform", drape=garment
+    )
     return written
