@@ -64,9 +64,22 @@ def metrics(pred, truth, channels=None) -> dict:
     return out
 
 
-def validate(model, m: Measurement, mapping: str = "deviation") -> dict:
-    """Metrics of ``model`` against every sample of ``m``."""
-    pred = evaluate(model, m.wi, m.wr, mapping)
+def validate(model, m: Measurement, mapping: str | None = None) -> dict:
+    """Metrics of ``model`` against every sample of ``m``.
+
+    ``mapping`` defaults to the model's own (``parameters["mapping"]``, else
+    ``deviation``).  A model fitted to scattered data in a sample frame
+    (:func:`kesbrdf.scattered.fit_scattered`) is evaluated in that frame, turned by its
+    recorded ``warp_offset_deg``.
+    """
+    if mapping is None:
+        mapping = model.parameters.get("mapping", "deviation")
+    if model.parameters.get("fit") == "scattered":
+        from kesbrdf.scattered import evaluate_sample_frame
+
+        pred = evaluate_sample_frame(model, m.wi, m.wr, mapping)
+    else:
+        pred = evaluate(model, m.wi, m.wr, mapping)
     channels = list(m.channels)
     if tuple(model.channels) != tuple(m.channels):
         if model.n_channels == 1:

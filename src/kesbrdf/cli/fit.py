@@ -18,6 +18,9 @@ def add_arguments(p):
     p.add_argument("--kind", choices=("kes", "kes-halfdiff"), default="kes",
                    help="kes: the paper's table rho(phi, gamma); kes-halfdiff: KES per (theta_h, theta_d) "
                    "for data with several incidence angles per orientation")
+    p.add_argument("--warp-deg", type=float, default=None,
+                   help="scattered (general-geometry) data: azimuth of the warp in the file's frame; "
+                   "default: searched")
     p.add_argument("--interpolation", choices=("kes", "nearest", "linear"), default="kes",
                    help="interpolation over phi (nearest/linear are baselines)")
 
@@ -37,6 +40,18 @@ def run(args) -> int:
             from kesbrdf.errors import KesbrdfError
 
             raise KesbrdfError(f"--body: expected auto, none or a number, got {args.body!r}") from None
+    if not m.is_in_plane.any():
+        # scattered data (e.g. CUReT): fit the KES table + body by least squares
+        from kesbrdf.scattered import fit_scattered
+
+        model = fit_scattered(m, warp_deg=args.warp_deg, body=body)
+        model.save(args.output)
+        p = model.parameters
+        stderr(
+            f"wrote {args.output}: scattered fit of {len(m)} samples, warp at {p['warp_offset_deg']:.1f} deg "
+            f"({p.get('warp_offset_rule', 'given')}), symmetry {p.get('symmetry')}, body {model.body.tolist()}"
+        )
+        return 0
     if args.kind == "kes-halfdiff":
         from kesbrdf.halfdiff import fit_halfdiff
 

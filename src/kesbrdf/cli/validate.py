@@ -13,7 +13,8 @@ def add_arguments(p):
     p.add_argument("model", help="model file")
     p.add_argument("measurement", help="measurement CSV")
     p.add_argument("--json", dest="json_out", help="also write the metrics as JSON")
-    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector"), default="deviation")
+    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector"), default=None,
+                   help="default: the model's own (deviation unless fitted otherwise)")
 
 
 def run(args) -> int:
@@ -25,6 +26,7 @@ def run(args) -> int:
     model = load(args.model)
     m = read_measurement(args.measurement)
     result = validate(model, m, args.mapping)
+    args.mapping = result["mapping"]
     result.update({"model": args.model, "measurement": args.measurement, "measurement_sha256": m.sha256})
     print_metrics(result, title=f"{args.model} vs {args.measurement} ({args.mapping})")
     if args.json_out:
