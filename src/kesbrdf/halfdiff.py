@@ -519,14 +519,7 @@ def fit_halfdiff(
             "n_phi": int(n_phi),
         },
         diagnostics=diagnostics,
-        input_info={
-            "name": m.source,
-            "sha256": m.sha256,
-            "sample": m.metadata.get("sample"),
-            "quantity": m.metadata.get("quantity", "brdf"),
-            "simulated": m.metadata.get("simulated"),
-            "n_samples": len(m),
-        },
+        input_info=m.input_info(),
     )
 
 

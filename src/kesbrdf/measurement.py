@@ -161,6 +161,17 @@ class Measurement:
             return np.empty(0)
         return np.unique(np.round(self.psi[self.is_in_plane], decimals))
 
+    def input_info(self) -> dict:
+        """What a model records of its input: file, SHA-256, sample, quantity."""
+        return {
+            "name": self.source,
+            "sha256": self.sha256,
+            "sample": self.metadata.get("sample"),
+            "quantity": self.metadata.get("quantity", "brdf"),
+            "simulated": self.metadata.get("simulated"),
+            "n_samples": len(self),
+        }
+
     def subset(self, mask) -> "Measurement":
         """A new measurement holding only the rows where ``mask`` is true."""
         mask = np.asarray(mask)

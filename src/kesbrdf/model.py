@@ -324,14 +324,7 @@ def fit(
             "n_phi": n_phi,
         },
         diagnostics=diagnostics,
-        input_info={
-            "name": m.source,
-            "sha256": m.sha256,
-            "sample": m.metadata.get("sample"),
-            "quantity": m.metadata.get("quantity", "brdf"),
-            "simulated": m.metadata.get("simulated"),
-            "n_samples": len(m),
-        },
+        input_info=m.input_info(),
     )
 
 

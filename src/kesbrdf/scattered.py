@@ -641,14 +641,7 @@ def fit_scattered(
             "warp_search": search,
             "warp_label_shift_slots": shift,
         },
-        input_info={
-            "name": m.source,
-            "sha256": m.sha256,
-            "sample": m.metadata.get("sample"),
-            "quantity": m.metadata.get("quantity", "brdf"),
-            "simulated": m.metadata.get("simulated"),
-            "n_samples": len(m),
-        },
+        input_info=m.input_info(),
     )
 
 

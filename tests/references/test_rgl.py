@@ -215,11 +215,17 @@ def test_reciprocity_within_the_measurement(felt, rng):
     assert np.percentile(rel, 95) < RECIPROCITY_P95_MAX
 
 
+#: Relative agreement of two single-precision evaluations of the same data.
+FLOAT32_RTOL = 2e-5
+
+
 @needs_mitsuba
 def test_viewer_parameterisation_is_the_transpose(felt, rng):
     viewer = RGLMeasured(FELT, parameterised_by="viewer")
     wi, wr = _upper(rng, 500), _upper(rng, 500)
-    np.testing.assert_array_equal(viewer(wi, wr), felt(wr, wi))
+    # the plugin interpolates in single precision (llvm_ad_rgb): the two calls may
+    # round differently, by a few float32 ulps over a handful of operations
+    np.testing.assert_allclose(viewer(wi, wr), felt(wr, wi), rtol=FLOAT32_RTOL)
 
 
 def test_unknown_parameterisation_raises():
