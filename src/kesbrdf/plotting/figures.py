@@ -80,6 +80,12 @@ def _colour(i: int):
     return f"C{i % 10}"
 
 
+#: Marker and dash per orientation, so that coinciding curves (a fabric symmetric
+#: under φ → π − φ has ψ = 45° on top of 135°) stay visible.
+_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+_DASHES = ("-", "--", "-.", ":")
+
+
 # --------------------------------------------------------------------------------------
 # plot_* : arrays in, artists out, no model math
 # --------------------------------------------------------------------------------------
@@ -124,12 +130,13 @@ def plot_rho_vs_gamma(
             r = np.atleast_2d(np.asarray(rho, float))[p]
             g = np.broadcast_to(np.asarray(gamma_deg, float), np.shape(np.atleast_2d(rho)))[p]
             keep = np.isfinite(r) & np.isfinite(g)
-            ax.plot(g[keep], r[keep], "o", ms=3.5, color=colour, label=f"ψ = {psi:g}° measured", gid="measured")
+            ax.plot(g[keep], r[keep], _MARKERS[p % len(_MARKERS)], ms=3.5 + 1.2 * (p % 2), mfc="none" if p % 2 else colour,
+                    color=colour, label=f"ψ = {psi:g}° measured", gid="measured")
         if model_rho is not None:
             ax.plot(
                 np.asarray(model_gamma_deg, float),
                 np.atleast_2d(np.asarray(model_rho, float))[p],
-                "-",
+                _DASHES[p % len(_DASHES)],
                 lw=1.4,
                 color=colour,
                 label=f"ψ = {psi:g}° KES model",
