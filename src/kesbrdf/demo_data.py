@@ -32,10 +32,14 @@ def embedded_measurement() -> Path:
 
 def embedded_manifest() -> Path | None:
     """Manifest of the image-based virtual black satin, if shipped and ingest is available."""
+    import importlib.util
+
     path = _data() / "virtual_black_satin" / "manifest.csv"
     try:
         import kesbrdf.acquisition.ingest  # noqa: F401
     except ImportError:
+        return None
+    if importlib.util.find_spec("tifffile") is None:  # the frames are 16-bit TIFF
         return None
     return path if path.exists() else None
 
