@@ -41,12 +41,12 @@ Conventions (checked in ``tests/references/test_rgl.py``)
 from __future__ import annotations
 
 import hashlib
-import os
 import struct
 from pathlib import Path
 
 import numpy as np
 
+from kesbrdf._drjit import import_mitsuba
 from kesbrdf.errors import FormatError, where
 
 __all__ = ["RGLMeasured", "read_tensor_file", "eval_plugin", "load_plugin", "VARIANT", "TENSOR_FIELDS_RGB"]
@@ -59,11 +59,6 @@ TENSOR_FIELDS_RGB = ("theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "r
 _MAGIC = b"tensor_file\0"
 #: Tensor-file dtype codes (Mitsuba ``Struct::Type``) to numpy.
 _DTYPES = {1: "u1", 2: "i1", 3: "u2", 4: "i2", 5: "u4", 6: "i4", 7: "u8", 8: "i8", 9: "f2", 10: "f4", 11: "f8"}
-_LLVM_CANDIDATES = (
-    "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
-    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so",
-    "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1",
-)
 
 
 def read_tensor_file(path) -> dict:
@@ -117,19 +112,7 @@ def read_tensor_file(path) -> dict:
 
 
 def _import_mitsuba():
-    if not os.environ.get("DRJIT_LIBLLVM_PATH"):
-        for candidate in _LLVM_CANDIDATES:
-            if Path(candidate).exists():
-                os.environ["DRJIT_LIBLLVM_PATH"] = candidate
-                break
-    try:
-        import drjit as dr
-        import mitsuba as mi
-    except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError(
-            f"kesbrdf.references.rgl needs mitsuba and drjit ({exc}); install kesbrdf[render]"
-        ) from exc
-    return mi, dr
+    return import_mitsuba("kesbrdf.references.rgl")
 
 
 class _Variant:

@@ -13,29 +13,11 @@ to MP4/GIF, resumable), :mod:`~kesbrdf.render.colourways` (contact sheet).
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
+from kesbrdf._drjit import import_mitsuba
 
 VARIANT = "llvm_ad_rgb"
-_LLVM_CANDIDATES = (
-    "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
-    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so",
-    "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1",
-)
 
-if not os.environ.get("DRJIT_LIBLLVM_PATH"):
-    for _candidate in _LLVM_CANDIDATES:
-        if Path(_candidate).exists():
-            os.environ["DRJIT_LIBLLVM_PATH"] = _candidate
-            break
-
-try:
-    import drjit  # noqa: F401
-    import mitsuba as mi
-except ImportError as exc:  # pragma: no cover - depends on the environment
-    raise ImportError(
-        f"kesbrdf.render needs mitsuba and drjit ({exc}); install kesbrdf[render]"
-    ) from exc
+mi, _ = import_mitsuba("kesbrdf.render")
 
 if mi.variant() is None:
     mi.set_variant(VARIANT)

@@ -1,0 +1,32 @@
+"""Import Mitsuba 3 / Dr.Jit with an LLVM that works (DESIGN §7).
+
+Dr.Jit's LLVM backend needs LLVM ≥ 17 (15 and 16 crash mid-render).  When
+``DRJIT_LIBLLVM_PATH`` is unset (or empty) and Debian's ``libllvm19`` is installed, it is
+pointed at that library before the first import.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+LLVM_CANDIDATES = (
+    "/usr/lib/x86_64-linux-gnu/libLLVM-19.so",
+    "/usr/lib/aarch64-linux-gnu/libLLVM-19.so",
+    "/usr/lib/x86_64-linux-gnu/libLLVM.so.19.1",
+)
+
+
+def import_mitsuba(who: str):
+    """Return ``(mitsuba, drjit)``; ``who`` names the caller in the ImportError."""
+    if not os.environ.get("DRJIT_LIBLLVM_PATH"):
+        for candidate in LLVM_CANDIDATES:
+            if Path(candidate).exists():
+                os.environ["DRJIT_LIBLLVM_PATH"] = candidate
+                break
+    try:
+        import drjit as dr
+        import mitsuba as mi
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise ImportError(f"{who} needs mitsuba and drjit ({exc}); install kesbrdf[render]") from exc
+    return mi, dr
