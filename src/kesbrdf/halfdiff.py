@@ -176,11 +176,9 @@ class HalfDiffModel:
 
     def save(self, path):
         """Write the model file atomically (same JSON layout as the ``kes`` kind)."""
-        import json
+        from kesbrdf.io.model_file import save_model
 
-        from kesbrdf._atomic import write_text
-
-        return write_text(path, json.dumps(to_dict(self), indent=1, allow_nan=False) + "\n")
+        return save_model(path, self)
 
 
 # ---------------------------------------------------------------------------------
