@@ -8,19 +8,13 @@ from __future__ import annotations
 
 import json
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
+from _timing import best_of
 
-def _best_of(fn, repeats: int = 3) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
+
 
 
 def run() -> dict:
@@ -31,23 +25,23 @@ def run() -> dict:
     results: dict = {}
     embedded = embedded_manifest()
     n_embedded = len(read_manifest(embedded).rows)
-    seconds = _best_of(lambda: ingest(embedded))
+    seconds = best_of(lambda: ingest(embedded))
     results["ingest_embedded_frames"] = n_embedded
     results["ingest_embedded_fps"] = n_embedded / seconds  # 24x24 16-bit RGB TIFF
 
     brdf = black_satin()
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "frames"
-        sim_seconds = _best_of(lambda: simulate_images(brdf, folder, protocol="paper", size=128, margin=8, roi_inset=4, seed=1), repeats=1)
+        sim_seconds = best_of(lambda: simulate_images(brdf, folder, protocol="paper", size=128, margin=8, roi_inset=4, seed=1), repeats=1)
         manifest = folder / "manifest.csv"
         n = len(read_manifest(manifest).rows)
         results["simulate_128px_fps"] = n / sim_seconds
-        results["ingest_128px_fps"] = n / _best_of(lambda: ingest(manifest), repeats=2)
+        results["ingest_128px_fps"] = n / best_of(lambda: ingest(manifest), repeats=2)
 
         big = Path(tmp) / "big"
         simulate_images(brdf, big, protocol="paper", step_deg=30.0, size=512, margin=128, roi_inset=64, seed=1)
         n_big = len(read_manifest(big / "manifest.csv").rows)
-        results["ingest_512px_fps"] = n_big / _best_of(lambda: ingest(big / "manifest.csv"), repeats=2)
+        results["ingest_512px_fps"] = n_big / best_of(lambda: ingest(big / "manifest.csv"), repeats=2)
 
         # end-to-end error of the embedded chain against the reference
         m = ingest(embedded).measurement

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 
@@ -12,6 +11,8 @@ from kesbrdf.gonio import measure
 from kesbrdf.model import fit
 from kesbrdf.references.ward import AnisotropicWard
 from kesbrdf.validation import compare_reference
+
+from _timing import best_of
 
 #: References for the KES-vs-baselines ratio: a spread of lobe widths and
 #: anisotropies, not one material.
@@ -24,13 +25,6 @@ REFERENCES = {
 }
 
 
-def _best_of(fn, repeat=5):
-    best = np.inf
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def run() -> dict:
@@ -43,18 +37,18 @@ def run() -> dict:
     wr = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
     out = {}
     for mapping in MAPPINGS:
-        t = _best_of(lambda: evaluate(model, wi, wr, mapping), 3)
+        t = best_of(lambda: evaluate(model, wi, wr, mapping), 3)
         out[f"brdf_evals_per_s_{mapping}"] = n / t
-    t_ref = _best_of(lambda: ref(wi, wr), 3)
+    t_ref = best_of(lambda: ref(wi, wr), 3)
     out["brdf_evals_per_s_ward_reference"] = n / t_ref
-    out["fit_s_paper_116"] = _best_of(lambda: fit(m))
+    out["fit_s_paper_116"] = best_of(lambda: fit(m), 5)
     dense = measure(ref, protocol="dense", step_deg=6, noise=0.01, rng=2)
     out["dense_samples"] = len(dense)
-    out["fit_s_dense_rgb"] = _best_of(lambda: fit(dense))
+    out["fit_s_dense_rgb"] = best_of(lambda: fit(dense), 5)
     try:
         from kesbrdf.halfdiff import fit_halfdiff
 
-        out["fit_s_dense_rgb_halfdiff"] = _best_of(lambda: fit_halfdiff(dense), 2)
+        out["fit_s_dense_rgb_halfdiff"] = best_of(lambda: fit_halfdiff(dense), 2)
     except ImportError:
         pass
     ratios = {}

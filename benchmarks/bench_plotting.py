@@ -5,19 +5,13 @@ from __future__ import annotations
 
 import os
 import tempfile
-import time
 from pathlib import Path
+
+from _timing import best_of
 
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
-def _best_of(fn, repeat=3):
-    best = float("inf")
-    for _ in range(repeat):
-        t = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t)
-    return best
 
 
 def run() -> dict:
@@ -37,10 +31,10 @@ def run() -> dict:
             fig = make_figure(name, model=model, measurement=m, reference=ref)
             figure_bytes(fig, "png", dpi=100)
 
-        out[f"figure_{name}_png_s"] = _best_of(build_and_save)
+        out[f"figure_{name}_png_s"] = best_of(build_and_save)
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "report.html"
-        out["report_s"] = _best_of(lambda: write_report(path, model, m, ref), repeat=1)
+        out["report_s"] = best_of(lambda: write_report(path, model, m, ref), repeats=1)
         out["report_bytes"] = path.stat().st_size
     return out
 

@@ -15,21 +15,14 @@ import http.client
 import json
 import tempfile
 import threading
-import time
 from pathlib import Path
 
-import numpy as np
+
+from _timing import best_of
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def _best_of(fn, repeats: int = 5) -> float:
-    best = np.inf
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - start)
-    return best
 
 
 def run() -> dict:
@@ -58,10 +51,10 @@ def run() -> dict:
             return data
 
         size = len(call("GET", "/api/model/f0"))
-        results["api_model_ms"] = 1e3 * _best_of(lambda: call("GET", "/api/model/f0"))
+        results["api_model_ms"] = 1e3 * best_of(lambda: call("GET", "/api/model/f0"), 5)
         results["api_model_bytes"] = size
-        results["api_fit_116_samples_ms"] = 1e3 * _best_of(lambda: call("POST", "/api/fit?name=s.csv", csv), 3)
-        results["static_bundle_ms"] = 1e3 * _best_of(lambda: call("GET", "/assets/index.js"))
+        results["api_fit_116_samples_ms"] = 1e3 * best_of(lambda: call("POST", "/api/fit?name=s.csv", csv), 3)
+        results["static_bundle_ms"] = 1e3 * best_of(lambda: call("GET", "/assets/index.js"), 5)
         server.shutdown()
         server.server_close()
     frame = ROOT / "viewer" / "test-output" / "frame-time.json"
