@@ -1,5 +1,4 @@
 import numpy as np
-import pytest
 
 from kesbrdf.geometry import cartesian_to_spherical, in_plane_directions, spherical_to_cartesian
 

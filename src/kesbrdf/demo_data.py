@@ -11,7 +11,6 @@ Two forms, both simulated and labelled so in their headers:
 
 from __future__ import annotations
 
-import json
 from importlib import resources
 from pathlib import Path
 

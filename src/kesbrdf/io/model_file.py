@@ -70,8 +70,6 @@ def save_model(path, model) -> Path:
 
 def load_model(path):
     """Read a model file; errors name the file."""
-    from kesbrdf.model import Model
-
     path = Path(path)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
