@@ -1,0 +1,13 @@
+"""Exports: a kesbrdf model in the formats other tools read (``docs/exports.md``).
+
+Each format is one module in this package; :data:`FORMATS` maps the format name used by
+``kesbrdf export --format`` to that module, which provides
+``export(model, out_path, **options) -> ExportResult``.  One line per format.
+"""
+
+from __future__ import annotations
+
+__all__ = ["FORMATS"]
+
+#: format name -> module (imported on use, so each format's dependencies stay optional)
+FORMATS: dict[str, str] = {}
