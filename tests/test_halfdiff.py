@@ -190,9 +190,11 @@ def test_negative_kes_detected_and_log_fallback_recorded():
     ref = AnisotropicWard(0.08, 0.3, rho_d=0.0, rho_s=0.3)  # very different warp/weft, no body
     m = measure(ref, protocol="dense", step_deg=DENSE_STEP_DEG)
     with pytest.raises(KESError, match=r"K\(phi\) = 1/rho <= 0 .* fallback='log'"):
-        fit_halfdiff(m, body="none")
-    model = fit_halfdiff(m, body="none", fallback="log")
+        fit_halfdiff(m, body="none", fallback="error")  # the --strict behaviour
+    model = fit_halfdiff(m, body="none")  # default: recorded log fallback with a warning
     assert model.diagnostics["fallback"]["nodes"] > 0
+    (warning,) = model.diagnostics["warnings"]
+    assert "theta_h = " in warning and "node(s)" in warning
     assert model.diagnostics["floored"]["nodes"] > 0  # a pure lobe reaches the noise floor
     assert np.all(np.isfinite(model.table)) and np.all(model.table >= 0)
 
@@ -237,8 +239,10 @@ def test_to_dict_from_dict_round_trip_is_identical(dense_model, random_pairs, tm
 
 def test_from_dict_rejects_other_kinds_and_bad_shapes(dense_model):
     doc = to_dict(dense_model)
-    with pytest.raises(ModelError, match="expected model kind 'kes-halfdiff', got 'kes'"):
+    with pytest.raises(ModelError, match=r"x.json: missing array\(s\) gamma_grid, gamma_nodes, q_nodes of a 'kes' model"):
         from_dict({**doc, "kind": "kes"}, source="x.json")
+    with pytest.raises(ModelError, match="expected model kind one of 'kes', 'kes-halfdiff'.*got 'banana'"):
+        from_dict({**doc, "kind": "banana"}, source="x.json")
     arrays = dict(doc["arrays"])
     arrays["body"] = arrays["phi_grid"]
     with pytest.raises(ModelError, match="x.json: expected table of shape"):

@@ -64,9 +64,13 @@ def test_negative_kes_detected_and_log_fallback_recorded():
     ref = AnisotropicWard(0.08, 0.3, rho_d=0.0, rho_s=0.3)  # very different warp/weft, no body
     m = measure(ref)
     with pytest.raises(KESError, match="K\\(phi\\) = 1/rho <= 0 .* fallback='log'"):
-        fit(m, body="none")
-    model = fit(m, body="none", fallback="log")
+        fit(m, body="none", fallback="error")  # the --strict behaviour
+    model = fit(m, body="none")  # default: recorded log fallback with a warning
+    assert model.parameters["fallback"] == "log"
     assert model.diagnostics["fallback_gamma_deg"]
+    (warning,) = model.diagnostics["warnings"]
+    first = f"{model.diagnostics['fallback_gamma_deg'][0]:g}"
+    assert "gamma = " in warning and first in warning and "\n" not in warning
     assert np.all(np.isfinite(model.table)) and np.all(model.table >= 0)
 
 

@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.brdf import evaluate, lookup
+from kesbrdf.brdf import evaluate
 from kesbrdf.geometry import spherical_to_cartesian
+from kesbrdf.model import gamma0_behaviour
 
 __all__ = ["directional_albedo", "reciprocity_error", "gamma0_behaviour", "diagnose"]
 
@@ -63,28 +64,14 @@ def reciprocity_error(brdf, n: int = 4000, rng=0) -> float:
     return float(np.max(np.abs(a - b)[ok] / scale[ok])) if ok.any() else 0.0
 
 
-def gamma0_behaviour(model) -> dict:
-    """How the lobe varies with φ as γ → 0: the four measured peaks differ, so φ is
-    a discontinuity at the mirror direction (DESIGN §4).  Reports max/min of q over φ
-    at the first grid γ values."""
-    out = {}
-    for gamma in model.gamma_grid[:3]:
-        q = lookup(model, model.phi_grid, np.full(model.phi_grid.shape, gamma))
-        qmin = np.maximum(q.min(axis=0), np.finfo(float).tiny)
-        out[f"{np.degrees(gamma):.3g}"] = (q.max(axis=0) / qmin).tolist()
-    return {"q_max_over_min_by_gamma_deg": out, "measured_peaks": model.diagnostics.get("gamma0_peaks", {})}
+def diagnose(model, mapping: str | None = None, theta_deg=(0, 20, 40, 60, 80), phi_deg=(0, 45, 90, 135)) -> dict:
+    """All diagnostics of a model of any kind as plain numbers (JSON-ready).
 
+    ``mapping`` defaults to the kind's own; the mirror-direction report is the kind's
+    :meth:`~kesbrdf.kinds.ReflectanceModel.mirror_behaviour`.
+    """
+    mapping = model.check_mapping(mapping)
 
-def _mirror(model) -> dict:
-    if getattr(model, "kind", "kes") == "kes-halfdiff":
-        from kesbrdf.halfdiff import mirror_behaviour
-
-        return mirror_behaviour(model)
-    return gamma0_behaviour(model)
-
-
-def diagnose(model, mapping: str = "deviation", theta_deg=(0, 20, 40, 60, 80), phi_deg=(0, 45, 90, 135)) -> dict:
-    """All diagnostics of a model as plain numbers (JSON-ready)."""
     def brdf(wi, wr):
         return evaluate(model, wi, wr, mapping)
 
@@ -107,7 +94,8 @@ def diagnose(model, mapping: str = "deviation", theta_deg=(0, 20, 40, 60, 80), p
             "max": albedo.max(axis=0).tolist(),
             "above_one": flagged,
         },
-        "gamma0": _mirror(model),
+        "gamma0": model.mirror_behaviour(),
+        "warnings": model.warnings,
         "kes": {
             "fallback_gamma_deg": model.diagnostics.get("fallback_gamma_deg", []),
             "floored": len(model.diagnostics.get("floored", [])),

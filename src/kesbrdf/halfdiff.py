@@ -60,9 +60,11 @@ How the table is filled
    are recorded in ``diagnostics["floored"]``.
 6. KES: for every (θ_h, θ_d) node the whole-circle interpolation of K = 1/Q over φ
    (:func:`kesbrdf.kes.interpolate_circle`, 3 or 4 orientations) fills a φ grid of
-   ``n_phi`` cells.  Where K(φ) ≤ 0 somewhere, ``fallback="error"`` raises
-   :class:`~kesbrdf.errors.KESError` and ``fallback="log"`` interpolates log Q at that
-   node instead; those nodes are recorded in ``diagnostics["fallback"]``.
+   ``n_phi`` cells.  Where K(φ) ≤ 0 somewhere, the default ``fallback="log"``
+   interpolates log Q at that node instead, records the nodes in
+   ``diagnostics["fallback"]`` and a one-line warning naming the θ_h affected in
+   ``diagnostics["warnings"]``; ``fallback="error"`` raises
+   :class:`~kesbrdf.errors.KESError`.
 7. The body is split off again: ``table[φ, θ_h, θ_d, channel] = max(Q(φ) − c·w, 0)``.
 
 With the paper's protocol (one line θ_i + θ_r = 90°) each slot's samples lie on the
@@ -96,12 +98,23 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from typing import ClassVar
+
 from kesbrdf import kes
 from kesbrdf._version import __version__
-from kesbrdf.brdf import _azimuth
-from kesbrdf.errors import KESError, MeasurementError, ModelError, where
+from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
+from kesbrdf.kinds import ReflectanceModel, register
+from kesbrdf.mappings import HALFDIFF, in_plane_half_diff, to_half_diff
 from kesbrdf.measurement import Measurement
-from kesbrdf.model import FALLBACKS, ORIENTATION_TOL, RELATIVE_NOISE_FLOOR, _select_orientations
+from kesbrdf.model import (
+    FALLBACKS,
+    ORIENTATION_TOL,
+    RELATIVE_NOISE_FLOOR,
+    check_uniform_grid,
+    check_values,
+    fallback_warning,
+    select_orientations,
+)
 
 __all__ = [
     "KIND",
@@ -137,8 +150,9 @@ SCATTERED_THETA_STEP = math.radians(2.0)
 _ARRAYS = ("phi_grid", "theta_h_grid", "theta_d_grid", "table", "body")
 
 
+@register
 @dataclass
-class HalfDiffModel:
+class HalfDiffModel(ReflectanceModel):
     """A fitted ``kes-halfdiff`` model (module docstring).
 
     Attributes
@@ -154,79 +168,140 @@ class HalfDiffModel:
         Lambertian body term c, 1/sr.
     """
 
+    kind: ClassVar[str] = KIND
+    mappings: ClassVar[tuple[str, ...]] = (HALFDIFF,)
+    array_names: ClassVar[tuple[str, ...]] = _ARRAYS
+    fit_options: ClassVar[tuple[str, ...]] = (
+        "orientations", "fallback", "body", "noise_floor", "n_phi", "theta_step", "normalisation",
+    )
+
     channels: tuple[str, ...]
     phi_grid: np.ndarray
     theta_h_grid: np.ndarray
     theta_d_grid: np.ndarray
     table: np.ndarray
     body: np.ndarray
-    kind: str = KIND
     parameters: dict = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
     input_info: dict = field(default_factory=dict)
     kesbrdf_version: str = __version__
 
     @property
-    def n_channels(self) -> int:
-        return len(self.channels)
-
-    @property
     def orientations(self) -> int:
         return int(self.parameters.get("orientations", 4))
 
-    def save(self, path):
-        """Write the model file atomically (same JSON layout as the ``kes`` kind)."""
-        from kesbrdf.io.model_file import save_model
+    # -- kinds contract ---------------------------------------------------------
+    def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:
+        phi_h, theta_h, theta_d = to_half_diff(wi, wr)
+        q = lookup_halfdiff(self, phi_h, theta_h, theta_d)
+        if self.parameters.get("normalisation", "sqrtcos") == "sqrtcos":
+            q /= np.sqrt(wi[:, 2] * wr[:, 2])[:, None]
+        q += self.body
+        return q
 
-        return save_model(path, self)
+    def mirror_behaviour(self) -> dict:
+        return mirror_behaviour(self)
+
+    def to_payload(self):
+        return {}, {name: getattr(self, name) for name in _ARRAYS}
+
+    @classmethod
+    def from_payload(cls, fields: dict, arrays: dict, shared: dict, source=None) -> "HalfDiffModel":
+        arr = {name: arrays.get(name) for name in _ARRAYS}
+        missing = [n for n, a in arr.items() if a is None]
+        if missing:
+            raise ModelError(f"{where(source)}missing array(s) {', '.join(missing)}")
+        C = len(shared["channels"])
+        grids = {n: arr[n] for n in ("phi_grid", "theta_h_grid", "theta_d_grid")}
+        if any(g.ndim != 1 or g.size < 2 for g in grids.values()):
+            raise ModelError(
+                f"{where(source)}expected 1-D phi and theta grids of at least 2 values each, got shapes "
+                f"{[g.shape for g in grids.values()]}"
+            )
+        check_uniform_grid(grids["phi_grid"], 2 * np.pi / grids["phi_grid"].size, "phi_grid", source)
+        for name in ("theta_h_grid", "theta_d_grid"):
+            g = grids[name]
+            if not (np.isfinite(g[1]) and g[1] > 0):
+                raise ModelError(f"{where(source)}{name}: expected a uniform grid from 0, got {g[:3].tolist()}...")
+            check_uniform_grid(g, float(g[1]), name, source)
+            if g[-1] > np.pi + 1e-9:
+                raise ModelError(f"{where(source)}{name}: expected values up to pi, got {g[-1]!r}")
+        expected = (grids["phi_grid"].size, grids["theta_h_grid"].size, grids["theta_d_grid"].size, C)
+        if arr["table"].shape != expected or arr["body"].shape != (C,):
+            raise ModelError(
+                f"{where(source)}expected table of shape {expected} and body of shape ({C},), "
+                f"got {arr['table'].shape} and {arr['body'].shape}"
+            )
+        check_values(arr["table"], "table", source)
+        check_values(arr["body"], "body", source)
+        normalisation = shared["parameters"].get("normalisation", "sqrtcos")
+        if normalisation not in NORMALISATIONS:
+            raise ModelError(
+                f"{where(source)}parameters.normalisation: expected one of {', '.join(NORMALISATIONS)}, "
+                f"got {str(normalisation)[:40]!r}"
+            )
+        return cls(**shared, **arr)
+
+    @classmethod
+    def fit_measurement(cls, measurement, **options) -> "HalfDiffModel":
+        unknown = sorted(set(options) - set(cls.fit_options))
+        if unknown:
+            raise KesbrdfError(
+                f"option(s) {', '.join(unknown)} do not apply to kind {KIND!r}; it accepts {', '.join(cls.fit_options)}"
+            )
+        return fit_halfdiff(measurement, **options)
+
+    @classmethod
+    def usable_rows(cls, measurement, orientations=None):
+        """(mask, reason): in-plane rows at the 3–4 orientations, any (θ_i, θ_r)."""
+        m = measurement
+        mask = np.zeros(len(m), bool)
+        try:
+            _, _, rows = _halfdiff_rows(m, orientations)
+        except KesbrdfError as exc:
+            return mask, f"the {KIND!r} kind cannot fit this measurement: {exc}"
+        for r in rows:
+            mask[r] = True
+        parts = []
+        n_out = int(np.count_nonzero(~m.is_in_plane))
+        if n_out:
+            parts.append(f"{n_out} out of the plane of incidence")
+        other = int(np.count_nonzero(~mask)) - n_out
+        if other:
+            parts.append(f"{other} at orientations other than psi = 0, 45, 90, 135 deg")
+        return mask, "; ".join(parts)
 
 
 # ---------------------------------------------------------------------------------
-def in_plane_half_diff(theta_i, theta_r):
-    r"""(θ_h, θ_d, upper) of in-plane pairs (module docstring).
-
-    ``upper`` is true where θ_r ≥ θ_i (half vector at azimuth ψ, slot k).
-
-    >>> [round(float(np.degrees(v)), 9) for v in in_plane_half_diff(np.radians(12.0), np.radians(30.0))[:2]]
-    [9.0, 21.0]
-    """
-    theta_i = np.asarray(theta_i, float)
-    theta_r = np.asarray(theta_r, float)
-    return np.abs(theta_r - theta_i) / 2.0, (theta_i + theta_r) / 2.0, theta_r >= theta_i
-
-
-def to_half_diff(wi, wr):
-    """(φ_h, θ_h, θ_d) of direction pairs, radians (module docstring, Evaluation).
-
-    Parameters
-    ----------
-    wi, wr : array_like, shape (..., 3)
-        Unit vectors toward the light and the viewer.
-
-    Returns
-    -------
-    phi_h : ndarray
-        Half-vector azimuth in [0, 2π); the plane of incidence where h ∥ z.
-    theta_h : ndarray
-        Angle between h and the normal, [0, π/2) above the horizon.
-    theta_d : ndarray
-        Angle between wi (or wr) and h, [0, π/2].
-
-    >>> wi = np.array([-np.sin(0.2), 0, np.cos(0.2)]); wr = np.array([np.sin(0.6), 0, np.cos(0.6)])
-    >>> [round(float(v), 12) for v in to_half_diff(wi, wr)]
-    [0.0, 0.2, 0.4]
-    """
-    wi = np.asarray(wi, float)
-    wr = np.asarray(wr, float)
-    wi, wr = np.broadcast_arrays(wi, wr)
-    # h need not be normalised for its angles; every expression below is symmetric
-    # in (wi, wr) bit for bit (except φ_h at h ∥ z, where the table is π-periodic)
-    h = wi + wr
-    phi_h = _azimuth(h, wr - wi)
-    theta_h = np.arctan2(np.hypot(h[..., 0], h[..., 1]), h[..., 2])
-    # h bisects wi and wr: angle(wi, h) is half the angle between wi and wr
-    theta_d = 0.5 * np.arctan2(np.linalg.norm(np.cross(wi, wr), axis=-1), np.sum(wi * wr, axis=-1))
-    return phi_h, theta_h, theta_d
+def _halfdiff_rows(m: Measurement, orientations):
+    """(orientations, ψ's, in-plane rows per orientation) after the fit's checks."""
+    orientations = select_orientations(m, orientations)
+    psis = np.radians([0.0, 45.0, 90.0, 135.0][:orientations])
+    source = m.source or "measurement"
+    in_plane = np.flatnonzero(m.is_in_plane)
+    rows = [in_plane[np.abs(m.psi[in_plane] - psi) < ORIENTATION_TOL] for psi in psis]
+    used = np.concatenate(rows)
+    finite = np.all(np.isfinite(m.values[used]), axis=1)
+    if not finite.all():
+        raise MeasurementError(
+            f"{source}: expected finite values in the in-plane rows, got {int((~finite).sum())} NaN/inf row(s)"
+        )
+    for k, r in enumerate(rows):
+        n_distinct = np.unique(np.round(m.theta_i[r] - m.theta_r[r], 9)).size
+        if r.size < 2 or n_distinct < 2:
+            raise MeasurementError(
+                f"{source}: orientation psi = {np.degrees(psis[k]):g} deg needs samples at two or more "
+                f"deviations theta_r - theta_i, got {n_distinct}"
+            )
+        mirror = np.abs(m.theta_r[r] - m.theta_i[r]) < ANGLE_TOL
+        upper = m.theta_r[r] >= m.theta_i[r]
+        for sel, op in ((upper | mirror, ">="), (~upper | mirror, "<=")):
+            if np.count_nonzero(sel) < 2:
+                raise MeasurementError(
+                    f"{source}: orientation psi = {np.degrees(psis[k]):g} deg has fewer than two samples "
+                    f"with theta_r {op} theta_i"
+                )
+    return orientations, psis, rows
 
 
 def _natural_step(values, step):
@@ -313,7 +388,7 @@ def _body(values_used, body, C):
 def fit_halfdiff(
     m: Measurement,
     orientations: int | None = None,
-    fallback: str = "error",
+    fallback: str = "log",
     body="auto",
     noise_floor="auto",
     n_phi: int = DEFAULT_N_PHI,
@@ -329,8 +404,9 @@ def fit_halfdiff(
         incidence angles, the more of the hemisphere is measured rather than assumed.
     orientations : {None, 3, 4}
         As :func:`kesbrdf.model.fit`.
-    fallback : {"error", "log"}
-        What to do where K(φ) ≤ 0 between orientations (DESIGN §3).
+    fallback : {"log", "error"}
+        What to do where K(φ) ≤ 0 between orientations (DESIGN §3): log fallback with
+        a recorded warning (default) or :class:`KESError`.
     body : "auto", "none" or float
         Lambertian body term c in 1/sr (module docstring).
     noise_floor : "auto" or float
@@ -360,30 +436,14 @@ def fit_halfdiff(
         raise KESError(
             f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}"
         )
-    if not (isinstance(n_phi, (int, np.integer)) and n_phi > 0 and n_phi % 8 == 0):
+    if not (isinstance(n_phi, (int, np.integer)) and not isinstance(n_phi, bool) and n_phi > 0 and n_phi % 8 == 0):
         raise KESError(f"expected n_phi to be a positive multiple of 8, got {n_phi!r}")
-    orientations = _select_orientations(m, orientations)
-    psis = np.radians([0.0, 45.0, 90.0, 135.0][:orientations])
+    # 1. in-plane rows per orientation and their (θ_h, θ_d)
+    orientations, psis, rows = _halfdiff_rows(m, orientations)
     C = m.n_channels
     source = m.source or "measurement"
-
-    # 1. in-plane rows per orientation and their (θ_h, θ_d)
-    in_plane = np.flatnonzero(m.is_in_plane)
-    rows = [in_plane[np.abs(m.psi[in_plane] - psi) < ORIENTATION_TOL] for psi in psis]
     used = np.concatenate(rows)
-    finite = np.all(np.isfinite(m.values[used]), axis=1)
-    if not finite.all():
-        raise MeasurementError(
-            f"{source}: expected finite values in the in-plane rows, got {int((~finite).sum())} NaN/inf row(s)"
-        )
     theta_h, theta_d, _ = in_plane_half_diff(m.theta_i[used], m.theta_r[used])
-    for k, r in enumerate(rows):
-        n_distinct = np.unique(np.round(m.theta_i[r] - m.theta_r[r], 9)).size
-        if r.size < 2 or n_distinct < 2:
-            raise MeasurementError(
-                f"{source}: orientation psi = {np.degrees(psis[k]):g} deg needs samples at two or more "
-                f"deviations theta_r - theta_i, got {n_distinct}"
-            )
 
     # 1b. body term
     c, body_mode = _body(m.values[used], body, C)
@@ -464,7 +524,7 @@ def fit_halfdiff(
                 f"K(phi) = 1/rho <= 0 between the measured orientations at theta_h = "
                 f"{math.degrees(grid_h[bi[0]]):.4g} deg, theta_d = {math.degrees(grid_d[bj[0]]):.4g} deg "
                 f"({bi.size} node(s) affected): warp and weft differ too much for the KES form; use "
-                "fallback='log' (--fallback log) to interpolate log rho there instead"
+                "fallback='log' (the default; kesbrdf fit without --strict) to interpolate log rho there instead"
             )
         q_log = kes.interpolate_circle_log(q_half[bi, bj].transpose(0, 2, 1), phi_grid, orientations)
         K[bi, bj] = 1.0 / q_log
@@ -489,6 +549,8 @@ def fit_halfdiff(
     table = np.ascontiguousarray(np.maximum(table, 0.0))
 
     diagnostics = {
+        "warnings": [fallback_warning("theta_h", fallback_info["theta_h_deg"], fallback_info["nodes"])]
+        if fallback_info["nodes"] else [],
         "floored": floored,
         "noise_floor": floor.tolist(),
         "fallback": fallback_info,
@@ -563,7 +625,8 @@ def evaluate_halfdiff(model: HalfDiffModel, wi, wr) -> np.ndarray:
     .. math:: f_r = c + T(\\phi_h, \\theta_h, \\theta_d) / \\sqrt{\\cos\\theta_i\\cos\\theta_r}
 
     (without the square root for ``normalisation="none"``).  Zero when either
-    direction is at or below the horizon; NaN in gives NaN out.
+    direction is at or below the horizon; NaN in gives NaN out
+    (:func:`kesbrdf.mappings.evaluate_pairs`).  Same as ``model.evaluate(wi, wr)``.
 
     >>> from kesbrdf.gonio import measure
     >>> from kesbrdf.references.ward import AnisotropicWard
@@ -572,22 +635,7 @@ def evaluate_halfdiff(model: HalfDiffModel, wi, wr) -> np.ndarray:
     >>> bool(np.allclose(evaluate_halfdiff(model, m.wi, m.wr), m.values, rtol=1e-9))
     True
     """
-    wi = np.asarray(wi, float)
-    wr = np.asarray(wr, float)
-    wi, wr = np.broadcast_arrays(wi, wr)
-    cos_theta_i = wi[..., 2]
-    cos_theta_r = wr[..., 2]
-    above = (cos_theta_i > 0) & (cos_theta_r > 0)
-    nan_in = np.isnan(wi).any(axis=-1) | np.isnan(wr).any(axis=-1)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        phi_h, theta_h, theta_d = to_half_diff(wi, wr)
-        q = lookup_halfdiff(model, phi_h, theta_h, theta_d)
-        if model.parameters.get("normalisation", "sqrtcos") == "sqrtcos":
-            norm = np.sqrt(np.where(above, cos_theta_i * cos_theta_r, 1.0))
-            q = q / norm[..., None]
-        f = model.body + q
-    f = np.where(above[..., None], f, 0.0)
-    return np.where(nan_in[..., None], np.nan, f)
+    return model.evaluate(wi, wr)
 
 
 def mirror_behaviour(model: HalfDiffModel, n_theta_h: int = 3, theta_d_deg=(0.0, 30.0, 60.0)) -> dict:
@@ -611,55 +659,17 @@ def mirror_behaviour(model: HalfDiffModel, n_theta_h: int = 3, theta_d_deg=(0.0,
 
 # ---------------------------------------------------------------------------------
 def to_dict(model: HalfDiffModel) -> dict:
-    """The model file document (same top-level layout as the ``kes`` kind)."""
-    from kesbrdf.io.model_file import FORMAT, FORMAT_VERSION, encode_array
+    """The model file document (:func:`kesbrdf.io.model_file.model_to_dict`)."""
+    from kesbrdf.io.model_file import model_to_dict
 
-    return {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "kesbrdf_version": model.kesbrdf_version,
-        "kind": KIND,
-        "channels": list(model.channels),
-        "input": model.input_info,
-        "parameters": model.parameters,
-        "diagnostics": model.diagnostics,
-        "arrays": {name: encode_array(getattr(model, name)) for name in _ARRAYS},
-    }
+    return model_to_dict(model)
 
 
 def from_dict(doc, source=None) -> HalfDiffModel:
     """Inverse of :func:`to_dict`; errors name ``source``."""
-    from kesbrdf.io.model_file import FORMAT, FORMAT_VERSION, decode_array
+    from kesbrdf.io.model_file import model_from_dict
 
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
-        got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise ModelError(f"{where(source)}expected format {FORMAT!r}, got {got!r}")
-    if doc.get("format_version") != FORMAT_VERSION:
-        raise ModelError(
-            f"{where(source)}expected model format version {FORMAT_VERSION}, got {doc.get('format_version')!r}"
-        )
-    if doc.get("kind") != KIND:
-        raise ModelError(f"{where(source)}expected model kind {KIND!r}, got {doc.get('kind')!r}")
-    arrays = doc.get("arrays", {})
-    missing = [a for a in _ARRAYS if a not in arrays]
-    if missing:
-        raise ModelError(f"{where(source)}missing array(s) {', '.join(missing)}")
-    arr = {name: decode_array(arrays[name], name, source) for name in _ARRAYS}
-    channels = tuple(doc.get("channels", ()))
-    expected = (arr["phi_grid"].size, arr["theta_h_grid"].size, arr["theta_d_grid"].size, len(channels))
-    if arr["table"].shape != expected or arr["body"].shape != (len(channels),):
-        raise ModelError(
-            f"{where(source)}expected table of shape {expected} and body of shape ({len(channels)},), "
-            f"got {arr['table'].shape} and {arr['body'].shape}"
-        )
-    if min(arr["theta_h_grid"].size, arr["theta_d_grid"].size) < 2:
-        raise ModelError(f"{where(source)}expected theta grids of at least 2 values")
-    return HalfDiffModel(
-        channels=channels,
-        kind=KIND,
-        parameters=doc.get("parameters", {}),
-        diagnostics=doc.get("diagnostics", {}),
-        input_info=doc.get("input", {}),
-        kesbrdf_version=doc.get("kesbrdf_version", __version__),
-        **arr,
-    )
+    model = model_from_dict(doc, source)
+    if not isinstance(model, HalfDiffModel):
+        raise ModelError(f"{where(source)}expected model kind {KIND!r}, got {model.kind!r}")
+    return model

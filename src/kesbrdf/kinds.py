@@ -33,6 +33,24 @@ Methods:
     Fit this kind; options it does not know are an error.
 ``usable_rows(measurement) -> (mask, reason)`` (classmethod)
     Which rows this kind can use, and a one-line reason for the others.
+
+A kind implements ``evaluate_unit(wi, wr, mapping) -> (n, C)``, its core: the base
+class's :meth:`ReflectanceModel.evaluate` checks the mapping and hands the core only
+clean pairs (unit rows above the horizon, in chunks) through
+:func:`kesbrdf.mappings.evaluate_pairs`, which supplies the zeros and NaNs.
+
+Fitters and automatic selection
+-------------------------------
+:func:`kesbrdf.fit` (``kesbrdf.fitting``) chooses among *fitters*: every kind is one
+(its class's ``fit_measurement``), and a fitting method that produces an existing kind
+(the scattered fit, which yields a ``kes`` model with a recorded sample-frame warp) is
+one too, registered with :func:`register_fitter`.  :data:`FIT_MODULES` says where each
+lives and :data:`AUTO_CANDIDATES` is the order ``kind="auto"`` tries them in: the first
+candidate that uses every row wins, else the one that uses most (docs/models.md).
+A new kind joins automatic selection with one entry in each.
+
+Consumers (figures, renderer, viewer, exports) call :func:`require_kind` with the kinds
+they support, which gives a one-line :class:`~kesbrdf.errors.ModelError` for the rest.
 """
 
 from __future__ import annotations
@@ -44,8 +62,21 @@ import numpy as np
 
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
+from kesbrdf.mappings import evaluate_pairs
 
-__all__ = ["ReflectanceModel", "register", "kind_class", "known_kinds", "KIND_MODULES"]
+__all__ = [
+    "ReflectanceModel",
+    "register",
+    "register_fitter",
+    "kind_class",
+    "fitter_class",
+    "known_kinds",
+    "known_fitters",
+    "require_kind",
+    "KIND_MODULES",
+    "FIT_MODULES",
+    "AUTO_CANDIDATES",
+]
 
 #: Where each kind's class lives; imported on first use so that a kind's heavy
 #: dependencies are paid only by its users.  One line per kind.
@@ -54,7 +85,20 @@ KIND_MODULES: dict[str, str] = {
     "kes-halfdiff": "kesbrdf.halfdiff",
 }
 
+#: Where each fitter lives: every kind, plus fitting methods that produce an existing
+#: kind (``scattered`` builds a ``kes`` model).  One line per fitter.
+FIT_MODULES: dict[str, str] = {
+    **KIND_MODULES,
+    "scattered": "kesbrdf.scattered",
+}
+
+#: The order in which ``kesbrdf.fit(m, kind="auto")`` tries the fitters: the first that
+#: uses every row wins, else the one that uses the most (ties: the earlier).  Simpler
+#: models first, so the paper's protocol gets the paper's kind.
+AUTO_CANDIDATES: list[str] = ["kes", "kes-halfdiff", "scattered"]
+
 _REGISTRY: dict[str, type] = {}
+_FITTERS: dict[str, type] = {}
 
 
 class ReflectanceModel:
@@ -62,6 +106,11 @@ class ReflectanceModel:
 
     kind: ClassVar[str] = ""
     mappings: ClassVar[tuple[str, ...]] = ()
+    #: Names of the keyword options ``fit_measurement`` accepts (``kesbrdf.fit`` rejects
+    #: the others with a one-line error).
+    fit_options: ClassVar[tuple[str, ...]] = ()
+    #: Names of the arrays ``to_payload`` writes and ``from_payload`` needs.
+    array_names: ClassVar[tuple[str, ...]] = ()
 
     channels: tuple[str, ...]
     parameters: dict
@@ -77,6 +126,12 @@ class ReflectanceModel:
     def default_mapping(self) -> str:
         return self.mappings[0]
 
+    @property
+    def warnings(self) -> list[str]:
+        """One-line warnings recorded when the model was fitted (``diagnostics["warnings"]``)."""
+        w = self.diagnostics.get("warnings", []) if isinstance(self.diagnostics, dict) else []
+        return [str(x) for x in w] if isinstance(w, list) else []
+
     def check_mapping(self, mapping: str | None) -> str:
         """``mapping`` or the default; a one-line error for mappings this kind lacks."""
         if mapping is None:
@@ -88,8 +143,23 @@ class ReflectanceModel:
             )
         return mapping
 
-    def evaluate(self, wi, wr, mapping: str | None = None) -> np.ndarray:  # pragma: no cover
+    def evaluate(self, wi, wr, mapping: str | None = None) -> np.ndarray:
+        """f_r(wi, wr) in 1/sr, shape broadcast(wi, wr)[:-1] + (C,).
+
+        Directions need not be normalised; a pair at or below the horizon
+        (cos θ ≤ :data:`kesbrdf.mappings.COS_EPS`, or a zero vector) gives 0, a pair
+        with a non-finite component gives NaN (:func:`kesbrdf.mappings.evaluate_pairs`).
+        """
+        mapping = self.check_mapping(mapping)
+        return evaluate_pairs(self.evaluate_unit, wi, wr, self.n_channels, mapping)
+
+    def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:  # pragma: no cover
+        """The kind's core: unit rows (n, 3) above the horizon -> f_r (n, C)."""
         raise NotImplementedError
+
+    def mirror_behaviour(self) -> dict:
+        """How the lobe varies with azimuth at the mirror direction (DESIGN §4); {} if n/a."""
+        return {}
 
     def to_payload(self) -> tuple[dict, dict[str, np.ndarray]]:  # pragma: no cover
         raise NotImplementedError
@@ -114,15 +184,36 @@ class ReflectanceModel:
 
 
 def register(cls: type) -> type:
-    """Class decorator: add a :class:`ReflectanceModel` subclass to the registry."""
+    """Class decorator: add a :class:`ReflectanceModel` subclass to the registry.
+
+    A kind is also the fitter of its own name.
+    """
     if not cls.kind or not cls.mappings:
         raise RuntimeError(f"{cls.__name__}: a model kind needs 'kind' and 'mappings'")
     _REGISTRY[cls.kind] = cls
+    _FITTERS.setdefault(cls.kind, cls)
     return cls
+
+
+def register_fitter(name: str):
+    """Class decorator: register a fitter ``name`` (a class with ``kind`` — the kind it
+    produces — ``fit_options``, and classmethods ``fit_measurement`` and ``usable_rows``)."""
+    def deco(cls: type) -> type:
+        for attr in ("kind", "fit_options", "fit_measurement", "usable_rows"):
+            if not hasattr(cls, attr):
+                raise RuntimeError(f"{cls.__name__}: a fitter needs {attr!r}")
+        _FITTERS[name] = cls
+        return cls
+
+    return deco
 
 
 def known_kinds() -> tuple[str, ...]:
     return tuple(KIND_MODULES)
+
+
+def known_fitters() -> tuple[str, ...]:
+    return tuple(FIT_MODULES)
 
 
 def kind_class(name, source=None) -> type:
@@ -136,3 +227,31 @@ def kind_class(name, source=None) -> type:
     if name not in _REGISTRY:
         raise RuntimeError(f"module {KIND_MODULES[name]} did not register kind {name!r}")
     return _REGISTRY[name]
+
+
+def fitter_class(name) -> type:
+    """The fitter ``name`` (a kind or a fitting method); one-line error naming the known ones."""
+    if not isinstance(name, str) or name not in FIT_MODULES:
+        raise ModelError(f"expected kind one of {', '.join(map(repr, ('auto',) + known_fitters()))}, got {name!r}")
+    if name not in _FITTERS:
+        importlib.import_module(FIT_MODULES[name])
+    if name not in _FITTERS:
+        raise RuntimeError(f"module {FIT_MODULES[name]} did not register fitter {name!r}")
+    return _FITTERS[name]
+
+
+def require_kind(model, kinds, consumer: str, source=None):
+    """Return ``model`` if its kind is one of ``kinds``; else a one-line :class:`ModelError`.
+
+    >>> class M: kind = "kes-halfdiff"
+    >>> require_kind(M(), ("kes",), "figure 5")
+    Traceback (most recent call last):
+    ...
+    kesbrdf.errors.ModelError: figure 5 supports models of kind 'kes'; got a 'kes-halfdiff' model
+    """
+    kind = getattr(model, "kind", None)
+    if kind not in kinds:
+        raise ModelError(
+            f"{where(source)}{consumer} supports models of kind {', '.join(map(repr, kinds))}; got a {kind!r} model"
+        )
+    return model

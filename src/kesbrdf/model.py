@@ -26,9 +26,11 @@ How the table is filled
    (linear in q; the grid contains every measured |γ| when they are uniformly
    spaced, so the measured values are kept exactly).
 5. For every γ of the grid, K = 1/q is interpolated over φ by :mod:`kesbrdf.kes`.
-   Where K(φ) ≤ 0 somewhere (the hazard of DESIGN §3), ``fallback="error"`` raises
-   :class:`~kesbrdf.errors.KESError`; ``fallback="log"`` interpolates log q instead at
-   that γ and records it in ``diagnostics["fallback_gamma_deg"]``.
+   Where K(φ) ≤ 0 somewhere (the hazard of DESIGN §3, common on satins), the default
+   ``fallback="log"`` interpolates log q instead at that γ, records it in
+   ``diagnostics["fallback_gamma_deg"]`` and adds a one-line warning naming the γ
+   affected to ``diagnostics["warnings"]``; ``fallback="error"`` (``kesbrdf fit
+   --strict``) raises :class:`~kesbrdf.errors.KESError` instead.
 
 Baselines (``interpolation="nearest"`` or ``"linear"``) fill the same table with the
 nearest measured half-sample or linear interpolation over φ, so they are evaluated
@@ -39,15 +41,29 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 
 from kesbrdf import kes
 from kesbrdf._version import __version__
-from kesbrdf.errors import KESError, MeasurementError
+from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
+from kesbrdf.kinds import ReflectanceModel, register
+from kesbrdf.mappings import MAPPINGS, paper_phi_gamma, to_phi_gamma
 from kesbrdf.measurement import Measurement
 
-__all__ = ["Model", "fit", "load", "INTERPOLATIONS", "FALLBACKS"]
+__all__ = [
+    "Model",
+    "fit",
+    "load",
+    "lookup",
+    "INTERPOLATIONS",
+    "FALLBACKS",
+    "select_orientations",
+    "line_weight",
+    "fill_table",
+    "fallback_warning",
+]
 
 INTERPOLATIONS = ("kes", "nearest", "linear")
 FALLBACKS = ("error", "log")
@@ -62,9 +78,37 @@ DEFAULT_N_PHI = 360
 MAX_GAMMA_STEP = math.radians(1.0)
 
 
+_ARRAYS = ("phi_grid", "gamma_grid", "table", "body", "gamma_nodes", "q_nodes")
+#: Grid values may differ from the uniform grid the lookup assumes by this much (radians).
+GRID_TOL = 1e-9
+
+
+@register
 @dataclass
-class Model:
-    """A fitted extended-KES model (see module docstring and docs/formats.md)."""
+class Model(ReflectanceModel):
+    """A fitted extended-KES model, kind ``"kes"`` (module docstring, docs/formats.md).
+
+    Attributes
+    ----------
+    channels : tuple of str
+    phi_grid : ndarray (n_phi,)
+        Deviation azimuths j·2π/n_phi, radians.
+    gamma_grid : ndarray (n_gamma,)
+        Uniform deviations from 0, radians.
+    table : ndarray (n_phi, n_gamma, C)
+        Lobe quantity q, 1/sr, ≥ 0.
+    body : ndarray (C,)
+        Lambertian body c, 1/sr.
+    gamma_nodes, q_nodes : ndarray
+        The measured half-sample nodes (for plots and the viewer).
+    """
+
+    kind: ClassVar[str] = "kes"
+    mappings: ClassVar[tuple[str, ...]] = MAPPINGS
+    array_names: ClassVar[tuple[str, ...]] = _ARRAYS
+    fit_options: ClassVar[tuple[str, ...]] = (
+        "orientations", "fallback", "body", "noise_floor", "interpolation", "n_phi", "gamma_step",
+    )
 
     channels: tuple[str, ...]
     phi_grid: np.ndarray
@@ -73,15 +117,10 @@ class Model:
     body: np.ndarray
     gamma_nodes: np.ndarray
     q_nodes: np.ndarray
-    kind: str = "kes"
     parameters: dict = field(default_factory=dict)
     diagnostics: dict = field(default_factory=dict)
     input_info: dict = field(default_factory=dict)
     kesbrdf_version: str = __version__
-
-    @property
-    def n_channels(self) -> int:
-        return len(self.channels)
 
     @property
     def gamma_max(self) -> float:
@@ -91,11 +130,229 @@ class Model:
     def orientations(self) -> int:
         return int(self.parameters.get("orientations", 4))
 
-    def save(self, path):
-        """Write the model file atomically (JSON + base64 arrays, no pickle)."""
-        from kesbrdf.io.model_file import save_model
+    @property
+    def sample_frame_warp(self) -> float:
+        """Sample-frame azimuth of the warp, radians (scattered fits; 0 otherwise)."""
+        try:
+            return math.radians(float(self.parameters.get("warp_offset_deg", 0.0) or 0.0))
+        except (TypeError, ValueError):
+            return 0.0
 
-        return save_model(path, self)
+    # -- evaluation (kinds contract) ------------------------------------------
+    def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:
+        """f_r of unit rows above the horizon (kinds contract), shape (n, C)."""
+        cos_theta_i = wi[:, 2]
+        cos_theta_r = wr[:, 2]
+        inv_norm = 1.0 / np.sqrt(cos_theta_i * cos_theta_r)
+        if mapping == "paper":
+            theta_i = np.arccos(np.minimum(cos_theta_i, 1.0))
+            theta_r = np.arccos(np.minimum(cos_theta_r, 1.0))
+            phi_i = np.arctan2(wi[:, 1], wi[:, 0])
+            phi_r = np.arctan2(wr[:, 1], wr[:, 0])
+            phi, gamma, sin_beta = paper_phi_gamma(theta_i, phi_i, theta_r, phi_r)
+            phi = np.mod(np.where(gamma < 0, phi + np.pi, phi), 2 * np.pi)
+            # ρ_KES is the measured quantity q on the paper's θ_i + θ_r = 90° line,
+            # body included: c·√(cos θ_i cos θ_r) = c·√(cos γ / 2) there.
+            rho = self.lookup_unit(phi, np.abs(gamma)) + self.body * np.sqrt(
+                np.clip(np.cos(gamma), 0, None) / 2
+            )[:, None]
+            return rho * (inv_norm / sin_beta)[:, None]
+        phi, gamma = to_phi_gamma(wi, wr, mapping)
+        q = self.lookup_unit(phi, gamma)
+        q *= inv_norm[:, None]
+        q += self.body
+        return q
+
+    def lookup_unit(self, phi, gamma) -> np.ndarray:
+        """Bilinear lookup for φ ∈ [0, 2π], γ ≥ 0 (finite), shape (n, C).
+
+        The table is read flattened with ``np.take``; see :func:`lookup` for the
+        general version.
+        """
+        T = self.table
+        n_phi, n_gamma, C = T.shape
+        u = phi * (n_phi / (2 * np.pi))
+        i0 = u.astype(np.intp)  # u ≥ 0: truncation is floor
+        fu = u - i0
+        i0[i0 >= n_phi] -= n_phi
+        i1 = i0 + 1
+        i1[i1 == n_phi] = 0
+        dgamma = self.gamma_grid[1] - self.gamma_grid[0]
+        v = np.minimum(gamma, self.gamma_grid[-1]) / dgamma
+        j0 = np.minimum(v.astype(np.intp), n_gamma - 1)
+        fv = v - j0
+        dj = (j0 < n_gamma - 1).astype(np.intp)
+        i0 *= n_gamma
+        i0 += j0
+        i1 *= n_gamma
+        i1 += j0
+        if C == 1:
+            flat = T.reshape(-1)
+            t00 = np.take(flat, i0)
+            t10 = np.take(flat, i1)
+            i0 += dj
+            i1 += dj
+            t01 = np.take(flat, i0)
+            t11 = np.take(flat, i1)
+        else:
+            flat = T.reshape(-1, C)
+            fu = fu[:, None]
+            fv = fv[:, None]
+            t00 = np.take(flat, i0, axis=0)
+            t10 = np.take(flat, i1, axis=0)
+            i0 += dj
+            i1 += dj
+            t01 = np.take(flat, i0, axis=0)
+            t11 = np.take(flat, i1, axis=0)
+        gu = 1.0 - fu
+        t00 *= gu
+        t10 *= fu
+        t00 += t10
+        t01 *= gu
+        t11 *= fu
+        t01 += t11
+        t00 *= 1.0 - fv
+        t01 *= fv
+        t00 += t01
+        return t00.reshape(-1, C)
+
+    def mirror_behaviour(self) -> dict:
+        """How the lobe varies with φ as γ → 0 (:func:`gamma0_behaviour`)."""
+        return gamma0_behaviour(self)
+
+    # -- model file (kinds contract) -------------------------------------------
+    def to_payload(self):
+        return {}, {name: getattr(self, name) for name in _ARRAYS}
+
+    @classmethod
+    def from_payload(cls, fields: dict, arrays: dict, shared: dict, source=None) -> "Model":
+        """Rebuild from the model file's arrays; shapes, grids and values are checked."""
+        arr = {name: arrays.get(name) for name in _ARRAYS}
+        missing = [n for n, a in arr.items() if a is None]
+        if missing:
+            raise ModelError(f"{where(source)}missing array(s) {', '.join(missing)}")
+        C = len(shared["channels"])
+        phi_grid, gamma_grid, table, body = arr["phi_grid"], arr["gamma_grid"], arr["table"], arr["body"]
+        if phi_grid.ndim != 1 or gamma_grid.ndim != 1 or phi_grid.size < 2 or gamma_grid.size < 2:
+            raise ModelError(
+                f"{where(source)}expected 1-D phi and gamma grids of at least 2 values each, got shapes "
+                f"{phi_grid.shape} and {gamma_grid.shape}"
+            )
+        n_phi, n_gamma = phi_grid.size, gamma_grid.size
+        check_uniform_grid(phi_grid, 2 * np.pi / n_phi, "phi_grid", source)
+        if not np.all(np.isfinite(gamma_grid)) or not gamma_grid[1] > 0:
+            raise ModelError(f"{where(source)}gamma_grid: expected a uniform grid from 0, got {gamma_grid[:3].tolist()}...")
+        check_uniform_grid(gamma_grid, float(gamma_grid[1]), "gamma_grid", source)
+        if gamma_grid[-1] > np.pi + GRID_TOL:
+            raise ModelError(f"{where(source)}gamma_grid: expected values up to pi, got {gamma_grid[-1]!r}")
+        if table.shape != (n_phi, n_gamma, C) or body.shape != (C,):
+            raise ModelError(
+                f"{where(source)}expected table of shape ({n_phi}, {n_gamma}, {C}) and body of "
+                f"shape ({C},), got {table.shape} and {body.shape}"
+            )
+        check_values(table, "table", source)
+        check_values(body, "body", source)
+        nodes, q_nodes = arr["gamma_nodes"], arr["q_nodes"]
+        if nodes.ndim != 1 or q_nodes.shape != (nodes.size, 8, C) or not np.all(np.isfinite(nodes)):
+            raise ModelError(
+                f"{where(source)}expected finite gamma_nodes (n,) and q_nodes (n, 8, {C}), got "
+                f"{nodes.shape} and {q_nodes.shape}"
+            )
+        if np.any(np.isinf(q_nodes)):
+            raise ModelError(f"{where(source)}q_nodes: expected finite values or NaN (unmeasured), got inf")
+        return cls(**shared, **arr)
+
+    # -- fitting (kinds contract) ----------------------------------------------
+    @classmethod
+    def fit_measurement(cls, measurement, **options) -> "Model":
+        unknown = sorted(set(options) - set(cls.fit_options))
+        if unknown:
+            raise KesbrdfError(
+                f"option(s) {', '.join(unknown)} do not apply to kind 'kes'; it accepts {', '.join(cls.fit_options)}"
+            )
+        return fit(measurement, **options)
+
+    @classmethod
+    def usable_rows(cls, measurement, orientations=None):
+        """(mask, reason): the rows :func:`fit` uses (one incidence line, 3–4 orientations)."""
+        m = measurement
+        mask = np.zeros(len(m), bool)
+        try:
+            orientations, _, at, line_sum = _kes_rows(m, orientations)
+        except KesbrdfError as exc:
+            return mask, f"the 'kes' kind cannot fit this measurement: {exc}"
+        for rows in at.values():
+            mask[rows[np.abs(m.theta_i[rows] + m.theta_r[rows] - line_sum) < 1e-6]] = True
+        in_plane = m.is_in_plane
+        parts = []
+        n_out = int(np.count_nonzero(~in_plane))
+        if n_out:
+            parts.append(f"{n_out} out of the plane of incidence")
+        other = in_plane & ~np.isin(np.arange(len(m)), np.concatenate(list(at.values())))
+        if other.any():
+            parts.append(f"{int(other.sum())} at orientations other than psi = "
+                         f"{', '.join(f'{d:g}' for d in (0, 45, 90, 135)[:orientations])} deg")
+        off = int(np.count_nonzero(~mask)) - n_out - int(other.sum())
+        if off:
+            parts.append(f"{off} off the incidence line theta_i + theta_r = {math.degrees(line_sum):g} deg "
+                         "(several incidence angles: the 'kes-halfdiff' kind uses them)")
+        return mask, "; ".join(parts)
+
+
+def check_uniform_grid(grid: np.ndarray, step: float, name: str, source=None) -> None:
+    """A one-line :class:`ModelError` unless ``grid`` is k·step, k = 0, 1, ... (within GRID_TOL)."""
+    expected = np.arange(grid.size) * step
+    if not (np.all(np.isfinite(grid)) and np.allclose(grid, expected, rtol=0, atol=GRID_TOL)):
+        raise ModelError(
+            f"{where(source)}{name}: expected the uniform grid k*{step:.6g} from 0 ({grid.size} values), "
+            f"got {grid[:3].tolist()}..."
+        )
+
+
+def check_values(a: np.ndarray, name: str, source=None) -> None:
+    """A one-line :class:`ModelError` unless ``a`` is finite and ≥ 0."""
+    bad = ~(np.isfinite(a) & (a >= 0))
+    if bad.any():
+        first = a[bad].flat[0]
+        raise ModelError(
+            f"{where(source)}{name}: expected finite non-negative values, got {int(bad.sum())} bad value(s), "
+            f"e.g. {float(first)!r}"
+        )
+
+
+def lookup(model, phi, gamma) -> np.ndarray:
+    """Bilinear lookup of the lobe table q at (φ, γ) (docs/formats.md, step 2).
+
+    Parameters
+    ----------
+    phi, gamma : array_like
+        Radians; φ is periodic, γ is clamped to [0, γ_max].  Broadcast together.
+        NaN in gives NaN out.
+
+    Returns
+    -------
+    ndarray, shape (..., C)
+    """
+    phi, gamma = np.broadcast_arrays(np.asarray(phi, float), np.asarray(gamma, float))
+    shape = phi.shape
+    phi = np.mod(phi.reshape(-1), 2 * np.pi)
+    gamma = np.clip(gamma.reshape(-1), 0.0, None)
+    nan = ~(np.isfinite(phi) & np.isfinite(gamma))
+    q = model.lookup_unit(np.where(nan, 0.0, phi), np.where(nan, 0.0, gamma))
+    q[nan] = np.nan
+    return q.reshape(shape + (model.table.shape[-1],))
+
+
+def gamma0_behaviour(model) -> dict:
+    """How the lobe varies with φ as γ → 0: the four measured peaks differ, so φ is
+    a discontinuity at the mirror direction (DESIGN §4).  Reports max/min of q over φ
+    at the first grid γ values."""
+    out = {}
+    for gamma in model.gamma_grid[:3]:
+        q = lookup(model, model.phi_grid, np.full(model.phi_grid.shape, gamma))
+        qmin = np.maximum(q.min(axis=0), np.finfo(float).tiny)
+        out[f"{np.degrees(gamma):.3g}"] = (q.max(axis=0) / qmin).tolist()
+    return {"q_max_over_min_by_gamma_deg": out, "measured_peaks": model.diagnostics.get("gamma0_peaks", {})}
 
 
 def load(path) -> Model:
@@ -106,7 +363,21 @@ def load(path) -> Model:
 
 
 # ---------------------------------------------------------------------------------
-def _select_orientations(m: Measurement, orientations):
+def fallback_warning(what: str, values_deg, n_total: int | None = None) -> str:
+    """The one-line warning of a log fallback (DESIGN §3), naming the angles affected."""
+    v = sorted({round(float(x), 3) for x in values_deg})
+    if len(v) <= 6:
+        named = ", ".join(f"{x:g}" for x in v)
+    else:
+        named = f"{v[0]:g} to {v[-1]:g} ({len(v)} values)"
+    return (
+        f"K(phi) = 1/rho <= 0 between the measured orientations at {what} = {named} deg"
+        f"{'' if n_total is None else f' ({n_total} node(s))'}: interpolated log rho there "
+        "(fallback 'log'; --strict or fallback='error' makes this an error)"
+    )
+
+
+def select_orientations(m: Measurement, orientations):
     present = m.orientations()
     if present.size == 0:
         raise MeasurementError(
@@ -133,6 +404,18 @@ def _select_orientations(m: Measurement, orientations):
     return orientations
 
 
+def _kes_rows(m: Measurement, orientations):
+    """(orientations, ψ's, in-plane rows per orientation, incidence line θ_i + θ_r)."""
+    orientations = select_orientations(m, orientations)
+    psis = np.radians([0.0, 45.0, 90.0, 135.0][:orientations])
+    in_plane = np.flatnonzero(m.is_in_plane)
+    at = {k: in_plane[np.abs(m.psi[in_plane] - psi) < ORIENTATION_TOL] for k, psi in enumerate(psis)}
+    if any(r.size == 0 for r in at.values()):
+        raise MeasurementError(f"{m.source or 'measurement'}: KES needs in-plane samples at every orientation used")
+    line_sum = _incidence_line(m, np.concatenate(list(at.values())))
+    return orientations, psis, at, line_sum
+
+
 def _incidence_line(m: Measurement, rows: np.ndarray) -> float:
     """The θ_i + θ_r line (radians) the KES table is built from.
 
@@ -155,7 +438,7 @@ def _merge_close(values, tol: float = 1e-12) -> np.ndarray:
     return v[keep]
 
 
-def _line_weight(gamma, line_sum: float) -> np.ndarray:
+def line_weight(gamma, line_sum: float) -> np.ndarray:
     """√(cos θ_i cos θ_r) on the line θ_i + θ_r = S at deviation γ: √((cos γ + cos S)/2)."""
     return np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2.0, 0.0, None))
 
@@ -163,7 +446,7 @@ def _line_weight(gamma, line_sum: float) -> np.ndarray:
 def fit(
     m: Measurement,
     orientations: int | None = None,
-    fallback: str = "error",
+    fallback: str = "log",
     body="auto",
     noise_floor="auto",
     interpolation: str = "kes",
@@ -179,8 +462,9 @@ def fit(
     orientations : {None, 3, 4}
         3 reproduces the paper's eq. 1–2; 4 (default when 135° was measured) uses
         all four orientations.
-    fallback : {"error", "log"}
-        What to do where K(φ) ≤ 0 between orientations (DESIGN §3).
+    fallback : {"log", "error"}
+        What to do where K(φ) ≤ 0 between orientations (DESIGN §3): interpolate log ρ
+        there with a recorded warning (default), or raise :class:`KESError`.
     body : "auto", "none" or float
         Lambertian body term c in 1/sr (module docstring).
     noise_floor : "auto" or float
@@ -203,16 +487,12 @@ def fit(
         raise KESError(
             f"unknown interpolation {interpolation!r}; expected one of {', '.join(INTERPOLATIONS)}"
         )
-    if n_phi % 8:
-        raise KESError(f"expected n_phi to be a multiple of 8, got {n_phi}")
-    orientations = _select_orientations(m, orientations)
-    psis = np.radians([0.0, 45.0, 90.0, 135.0][:orientations])
+    if not (isinstance(n_phi, (int, np.integer)) and not isinstance(n_phi, bool) and 0 < n_phi and n_phi % 8 == 0):
+        raise KESError(f"expected n_phi to be a positive multiple of 8, got {n_phi!r}")
+    orientations, psis, at, line_sum = _kes_rows(m, orientations)
     C = m.n_channels
 
     # 1. half-samples per orientation on one incidence line θ_i + θ_r = S
-    in_plane = np.flatnonzero(m.is_in_plane)
-    at = {k: in_plane[np.abs(m.psi[in_plane] - psi) < ORIENTATION_TOL] for k, psi in enumerate(psis)}
-    line_sum = _incidence_line(m, np.concatenate(list(at.values())))
     curves = {}  # slot -> (|γ| sorted, f values (n, C))
     used_rows = []
     for k in range(orientations):
@@ -254,7 +534,7 @@ def fit(
     q_half_nodes = np.full((gamma_nodes.size, 8, C), np.nan)
     for slot in slots:
         g, f = curves[slot]
-        q = f * _line_weight(g, line_sum)[:, None]
+        q = f * line_weight(g, line_sum)[:, None]
         for ch in range(C):
             q_half_nodes[:, slot, ch] = np.interp(gamma_nodes, g, q[:, ch])
 
@@ -286,18 +566,20 @@ def fit(
 
     # 5. interpolate over φ at every γ, then split off the body: lobe = q − c·w(γ)
     phi_grid = np.arange(n_phi) * (2 * np.pi / n_phi)
-    table, fallback_gamma = _fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback)
-    body_q = c[None, None, :] * _line_weight(gamma_grid, line_sum)[None, :, None]
+    table, fallback_gamma = fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback)
+    body_q = c[None, None, :] * line_weight(gamma_grid, line_sum)[None, :, None]
     lobe = table - body_q
     clamped = int(np.count_nonzero(lobe < -1e-12 * np.abs(table)))
     table = np.maximum(lobe, 0.0)
     q_total_nodes = q_half_nodes
-    q_half_nodes = q_half_nodes - c[None, None, :] * _line_weight(gamma_nodes, line_sum)[:, None, None]
+    q_half_nodes = q_half_nodes - c[None, None, :] * line_weight(gamma_nodes, line_sum)[:, None, None]
 
+    fallback_deg = [round(float(np.degrees(gamma_grid[i])), 6) for i in fallback_gamma]
     diagnostics = {
+        "warnings": [fallback_warning("gamma", fallback_deg)] if fallback_deg else [],
         "floored": floored,
         "noise_floor": floor.tolist(),
-        "fallback_gamma_deg": [round(float(np.degrees(gamma_grid[i])), 6) for i in fallback_gamma],
+        "fallback_gamma_deg": fallback_deg,
         "unused_rows": int(len(m) - used.size),
         "incidence_line_deg": round(float(np.degrees(line_sum)), 6),
         "lobe_clamped": clamped,
@@ -313,7 +595,6 @@ def fit(
         body=c,
         gamma_nodes=gamma_nodes,
         q_nodes=q_half_nodes,
-        kind="kes",
         parameters={
             "orientations": orientations,
             "fallback": fallback,
@@ -346,8 +627,12 @@ def _gamma_grid(nodes: np.ndarray, step) -> np.ndarray:
     return grid
 
 
-def _fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback):
-    """q(φ, γ) table, shape (n_phi, n_gamma, C), and the γ indices that fell back."""
+def fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback):
+    """q(φ, γ) table, shape (n_phi, n_gamma, C), and the γ indices that fell back.
+
+    ``q_half`` (n_gamma, 8, C): half-sample values per γ; K = 1/q is interpolated over
+    φ (:mod:`kesbrdf.kes`), log q where K ≤ 0 and ``fallback="log"``.
+    """
     slots = kes.half_slots(orientations)
     n_gamma, _, C = q_half.shape
     if interpolation == "nearest":
@@ -376,7 +661,7 @@ def _fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallb
                 f"K(phi) = 1/rho <= 0 between the measured orientations at gamma = "
                 f"{math.degrees(gamma_grid[g]):.4g} deg ({bad_gamma.size} gamma value(s) affected): "
                 "warp and weft differ too much for the KES form; use fallback='log' "
-                "(--fallback log) to interpolate log rho there instead"
+                "(the default; kesbrdf fit without --strict) to interpolate log rho there instead"
             )
         fallback_gamma = bad_gamma.tolist()
         q_log = kes.interpolate_circle_log(

@@ -91,13 +91,15 @@ import math
 import numpy as np
 
 from kesbrdf import kes
-from kesbrdf.brdf import evaluate, to_phi_gamma
 from kesbrdf.errors import KesbrdfError, MeasurementError
+from kesbrdf.kinds import register_fitter
+from kesbrdf.mappings import to_phi_gamma
 from kesbrdf.measurement import Measurement
-from kesbrdf.model import Model, _fill_table, _line_weight
+from kesbrdf.model import Model, fill_table, line_weight
 
 __all__ = [
     "fit_scattered",
+    "ScatteredFit",
     "fit_ward",
     "to_fabric_frame",
     "evaluate_sample_frame",
@@ -173,8 +175,8 @@ def evaluate_sample_frame(model: Model, wi, wr, mapping: str | None = None) -> n
     """
     if mapping is None:
         mapping = model.parameters.get("mapping", "deviation")
-    warp = math.radians(float(model.parameters.get("warp_offset_deg", 0.0) or 0.0))
-    return evaluate(model, to_fabric_frame(wi, warp), to_fabric_frame(wr, warp), mapping)
+    warp = model.sample_frame_warp
+    return model.evaluate(to_fabric_frame(wi, warp), to_fabric_frame(wr, warp), mapping)
 
 
 class RotatedBRDF:
@@ -245,8 +247,8 @@ class _Problem:
         self.a0 = np.searchsorted(self.J, j0)
         self.a1 = np.searchsorted(self.J, j1)
         self.P = _hat_matrix(gamma_grid[self.J], gamma_nodes)  # (|J|, n_nodes)
-        self.w_nodes = _line_weight(gamma_nodes, LINE_SUM)
-        self.w_J = _line_weight(gamma_grid[self.J], LINE_SUM)
+        self.w_nodes = line_weight(gamma_nodes, LINE_SUM)
+        self.w_J = line_weight(gamma_grid[self.J], LINE_SUM)
         self.Pw = self.P @ self.w_nodes
         # K(φ) = Σ_s K_half[s]·B[s, φ] (the KES interpolation is linear in K)
         self.B = kes.interpolate_circle(np.eye(8), self.phi_grid)  # (8, n_phi)
@@ -296,9 +298,9 @@ class _Problem:
         """Lobe table at γ-grid rows ``columns`` (as kesbrdf.model.fit), (|cols|, n_phi), and extras."""
         P = _hat_matrix(self.gamma_grid[columns], self.gamma_nodes)
         q_half = P @ (np.exp(theta) + c * self.w_nodes[:, None])  # (cols, 8)
-        T, fallback = _fill_table(q_half[:, :, None], self.phi_grid, self.gamma_grid[columns], 4, "kes", "log")
+        T, fallback = fill_table(q_half[:, :, None], self.phi_grid, self.gamma_grid[columns], 4, "kes", "log")
         T = T[:, :, 0].T  # (cols, n_phi), total q
-        lobe = T - c * _line_weight(self.gamma_grid[columns], LINE_SUM)[:, None]
+        lobe = T - c * line_weight(self.gamma_grid[columns], LINE_SUM)[:, None]
         return np.maximum(lobe, 0.0), T, q_half, fallback
 
     def predict(self, theta, c):
@@ -588,7 +590,7 @@ def fit_scattered(
         lobe, T, _, fallback = p.table_columns(theta_all[:, :, ch], bodies[ch], all_cols)
         tables.append(lobe.T)
         fallback_gamma.update(int(i) for i in fallback)
-        clamped += int(np.count_nonzero(T - bodies[ch] * _line_weight(gamma_grid, LINE_SUM)[:, None] < 0))
+        clamped += int(np.count_nonzero(T - bodies[ch] * line_weight(gamma_grid, LINE_SUM)[:, None] < 0))
     table = np.stack(tables, axis=-1)
     body_arr = np.asarray(bodies, float)
     if not (np.all(np.isfinite(table)) and np.all(table >= 0) and np.all(np.isfinite(body_arr))):
@@ -602,7 +604,6 @@ def fit_scattered(
         body=body_arr,
         gamma_nodes=gamma_nodes,
         q_nodes=np.exp(theta_all),
-        kind="kes",
         parameters={
             "orientations": 4,
             "fallback": "log",
@@ -643,6 +644,50 @@ def fit_scattered(
         },
         input_info=m.input_info(),
     )
+
+
+@register_fitter("scattered")
+class ScatteredFit:
+    """The scattered fit as a fitter of :mod:`kesbrdf.kinds`: it produces a ``kes`` model.
+
+    Decision (docs/decisions.md): not a kind of its own.  The table, the file and the
+    evaluation are the ``kes`` kind's, so the renderer, the viewer and the exports read
+    it unchanged; what is particular to it (the sample-frame warp, the symmetry, the
+    loss) is recorded in ``parameters``.
+    """
+
+    kind = "kes"
+    fit_options = ("warp_deg", "symmetry", "body", "smooth_gamma", "smooth_phi", "loss_scale",
+                   "gamma_nodes_deg", "offset_step_deg", "max_nfev", "mapping")
+
+    @classmethod
+    def fit_measurement(cls, measurement, **options) -> Model:
+        unknown = sorted(set(options) - set(cls.fit_options))
+        if unknown:
+            raise KesbrdfError(
+                f"option(s) {', '.join(unknown)} do not apply to the scattered fit; it accepts "
+                f"{', '.join(cls.fit_options)}"
+            )
+        return fit_scattered(measurement, **options)
+
+    @classmethod
+    def usable_rows(cls, measurement):
+        """(mask, reason): finite rows with both directions above the horizon."""
+        m = measurement
+        above = (m.wi[:, 2] > 0) & (m.wr[:, 2] > 0)
+        finite = np.all(np.isfinite(m.values), axis=1)
+        mask = above & finite
+        parts = []
+        if np.any(~above):
+            parts.append(f"{int(np.count_nonzero(~above))} with a direction at the horizon (theta = 90 deg)")
+        if np.any(above & ~finite):
+            parts.append(f"{int(np.count_nonzero(above & ~finite))} with non-finite values")
+        if np.count_nonzero(mask) < 8:
+            return np.zeros(len(m), bool), (
+                f"the scattered fit needs at least 8 usable rows (finite, above the horizon), got "
+                f"{int(np.count_nonzero(mask))}"
+            )
+        return mask, "; ".join(parts)
 
 
 def _fit_isotropic(problem, f, body_fixed, max_nfev):

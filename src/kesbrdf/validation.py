@@ -73,11 +73,14 @@ def validate(model, m: Measurement, mapping: str | None = None) -> dict:
     recorded ``warp_offset_deg``.
     """
     if mapping is None:
-        mapping = model.parameters.get("mapping", "deviation")
-    if model.parameters.get("fit") == "scattered":
-        from kesbrdf.scattered import evaluate_sample_frame
+        recorded = model.parameters.get("mapping")
+        mapping = recorded if recorded in model.mappings else model.default_mapping
+    mapping = model.check_mapping(mapping)
+    warp = getattr(model, "sample_frame_warp", 0.0)
+    if warp:
+        from kesbrdf.scattered import to_fabric_frame
 
-        pred = evaluate_sample_frame(model, m.wi, m.wr, mapping)
+        pred = evaluate(model, to_fabric_frame(m.wi, warp), to_fabric_frame(m.wr, warp), mapping)
     else:
         pred = evaluate(model, m.wi, m.wr, mapping)
     channels = list(m.channels)

@@ -1,13 +1,22 @@
 """The model file: one JSON document, arrays inline as base64 (``docs/formats.md``).
 
+This module handles what every kind shares — the header (``format``,
+``format_version``, ``kind``), the shared fields (``channels``, ``input``,
+``parameters``, ``diagnostics``, ``kesbrdf_version``) and the array codec — and looks
+the kind's class up in the registry (:mod:`kesbrdf.kinds`); it knows no model class.
+The kind's ``from_payload`` checks its own arrays (shapes, grids, values).
+
 No pickle anywhere: ``load_model(save_model(m))`` rebuilds an identical model from
-plain JSON and raw little-endian bytes.
+plain JSON and raw little-endian bytes.  Every malformed file gives a one-line
+:class:`~kesbrdf.errors.ModelError` naming it: types and shapes are checked before
+any allocation, nesting is bounded, non-finite tables are refused.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -15,12 +24,33 @@ import numpy as np
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
+from kesbrdf.kinds import kind_class
 
-__all__ = ["save_model", "load_model", "encode_array", "decode_array", "FORMAT", "FORMAT_VERSION"]
+__all__ = [
+    "save_model",
+    "load_model",
+    "model_to_dict",
+    "model_from_dict",
+    "encode_array",
+    "decode_array",
+    "FORMAT",
+    "FORMAT_VERSION",
+    "MAX_ARRAY_ELEMENTS",
+    "MAX_FILE_BYTES",
+    "MAX_DEPTH",
+]
 
 FORMAT = "kesbrdf-model"
 FORMAT_VERSION = 1
-ARRAYS = ("phi_grid", "gamma_grid", "table", "body", "gamma_nodes", "q_nodes")
+#: Largest array a model file may hold (elements): 2**27 doubles = 1 GiB.
+MAX_ARRAY_ELEMENTS = 1 << 27
+#: Largest model file read (bytes).
+MAX_FILE_BYTES = 2 << 30
+#: Deepest JSON nesting accepted (the writer's deepest is ~6).
+MAX_DEPTH = 64
+#: Array dtypes accepted on reading (the writer writes ``<f8``).
+DTYPES = ("<f8", "<f4")
+_SHARED = ("channels", "input", "parameters", "diagnostics")
 
 
 def encode_array(a) -> dict:
@@ -29,28 +59,60 @@ def encode_array(a) -> dict:
     return {"dtype": "<f8", "shape": list(a.shape), "data": base64.b64encode(a.tobytes()).decode("ascii")}
 
 
-def decode_array(obj: dict, name: str = "array", source=None) -> np.ndarray:
-    """Inverse of :func:`encode_array`, with clear errors for malformed entries."""
+def _is_int(x) -> bool:
+    return isinstance(x, int) and not isinstance(x, bool)
+
+
+def decode_array(obj, name: str = "array", source=None) -> np.ndarray:
+    """Inverse of :func:`encode_array`; every malformed entry is a one-line ModelError.
+
+    The shape is validated (list of non-negative ints, at most
+    :data:`MAX_ARRAY_ELEMENTS` elements) and the base64 length checked against it
+    before anything is decoded or allocated.
+    """
+    prefix = f"{where(source)}array {name!r}: "
+    if not isinstance(obj, dict):
+        raise ModelError(f"{prefix}expected an object with dtype, shape and data, got {type(obj).__name__}")
+    dtype, shape, data = obj.get("dtype"), obj.get("shape"), obj.get("data")
+    if not isinstance(dtype, str) or dtype not in DTYPES:
+        raise ModelError(f"{prefix}expected dtype one of {', '.join(DTYPES)}, got {str(dtype)[:40]!r}")
+    if not isinstance(shape, list) or len(shape) > 8 or not all(_is_int(s) and s >= 0 for s in shape):
+        raise ModelError(f"{prefix}expected shape a list of at most 8 non-negative integers, got {str(shape)[:60]}")
+    count = math.prod(shape)
+    if count > MAX_ARRAY_ELEMENTS:
+        raise ModelError(f"{prefix}expected at most {MAX_ARRAY_ELEMENTS} elements, got shape {shape}")
+    if not isinstance(data, str):
+        raise ModelError(f"{prefix}expected base64 text data, got {type(data).__name__}")
+    itemsize = np.dtype(dtype).itemsize
+    n_bytes = count * itemsize
+    if len(data) != 4 * ((n_bytes + 2) // 3):
+        raise ModelError(f"{prefix}expected {n_bytes} bytes of data for shape {shape}, got {len(data)} base64 characters")
     try:
-        dtype = np.dtype(obj["dtype"])
-        shape = tuple(int(s) for s in obj["shape"])
-        raw = base64.b64decode(obj["data"], validate=True)
-    except (KeyError, TypeError, ValueError) as exc:
-        raise ModelError(f"{where(source)}array {name!r}: expected dtype/shape/base64 data, got {exc}") from None
-    if dtype.kind != "f":
-        raise ModelError(f"{where(source)}array {name!r}: expected a float dtype, got {dtype}")
-    expected = int(np.prod(shape)) * dtype.itemsize
-    if len(raw) != expected:
-        raise ModelError(f"{where(source)}array {name!r}: expected {expected} bytes for shape {shape}, got {len(raw)}")
+        raw = base64.b64decode(data, validate=True)
+    except (ValueError, TypeError):
+        raise ModelError(f"{prefix}expected base64 data, got invalid characters or padding") from None
+    if len(raw) != n_bytes:
+        raise ModelError(f"{prefix}expected {n_bytes} bytes for shape {shape}, got {len(raw)}")
     return np.frombuffer(raw, dtype=dtype).reshape(shape).astype(float)
 
 
-def model_to_dict(model) -> dict:
-    if getattr(model, "kind", "kes") == "kes-halfdiff":
-        from kesbrdf.halfdiff import to_dict
+def _check_depth(doc, source) -> None:
+    """Iterative nesting check (no recursion on hostile input)."""
+    stack = [(doc, 1)]
+    while stack:
+        node, depth = stack.pop()
+        if depth > MAX_DEPTH:
+            raise ModelError(f"{where(source)}expected JSON nested at most {MAX_DEPTH} deep, got deeper")
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
 
-        return to_dict(model)
-    return {
+
+def model_to_dict(model) -> dict:
+    """The model file document of any registered kind."""
+    fields, arrays = model.to_payload()
+    doc = {
         "format": FORMAT,
         "format_version": FORMAT_VERSION,
         "kesbrdf_version": model.kesbrdf_version,
@@ -59,8 +121,13 @@ def model_to_dict(model) -> dict:
         "input": model.input_info,
         "parameters": model.parameters,
         "diagnostics": model.diagnostics,
-        "arrays": {name: encode_array(getattr(model, name)) for name in ARRAYS},
     }
+    clash = set(fields) & (set(doc) | {"arrays"})
+    if clash:
+        raise RuntimeError(f"kind {model.kind!r}: payload fields {sorted(clash)} clash with the header")
+    doc.update(fields)
+    doc["arrays"] = {name: encode_array(a) for name, a in arrays.items()}
+    return doc
 
 
 def save_model(path, model) -> Path:
@@ -69,48 +136,86 @@ def save_model(path, model) -> Path:
 
 
 def load_model(path):
-    """Read a model file; errors name the file."""
+    """Read a model file of any registered kind; errors name the file."""
     path = Path(path)
     try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
+        size = path.stat().st_size
+    except OSError:
+        size = 0
+    if size > MAX_FILE_BYTES:
+        raise ModelError(f"{where(path)}expected a model file of at most {MAX_FILE_BYTES} bytes, got {size}")
+    raw = path.read_bytes()
+    try:
+        text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ModelError(f"{where(path)}expected a kesbrdf model file (JSON), got binary data") from None
+    return model_from_text(text, source=path)
+
+
+def _no_constant(name):
+    raise ValueError(f"{name} is not valid JSON")
+
+
+def _finite_float(text):
+    value = float(text)
+    if not math.isfinite(value):
+        raise ValueError(f"number {text[:30]} overflows a double")
+    return value
+
+
+def model_from_text(text: str, source=None):
+    """Parse and check a model document given as text."""
+    try:
+        doc = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
     except json.JSONDecodeError as exc:
-        raise ModelError(f"{where(path, exc.lineno)}expected a kesbrdf model file (JSON), got invalid JSON: {exc.msg}") from None
-    return model_from_dict(doc, source=path)
+        raise ModelError(
+            f"{where(source, exc.lineno)}expected a kesbrdf model file (JSON), got invalid JSON: {exc.msg}"
+        ) from None
+    except RecursionError:
+        raise ModelError(f"{where(source)}expected JSON nested at most {MAX_DEPTH} deep, got deeper") from None
+    except ValueError as exc:  # NaN/Infinity constants, huge integers
+        raise ModelError(f"{where(source)}expected a kesbrdf model file (JSON), got {exc}") from None
+    return model_from_dict(doc, source=source)
 
 
 def model_from_dict(doc, source=None):
-    from kesbrdf.model import Model
-
+    """Check the header and shared fields, decode the arrays, and let the kind rebuild."""
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
-        raise ModelError(f"{where(source)}expected format {FORMAT!r}, got {got!r}")
+        raise ModelError(f"{where(source)}expected format {FORMAT!r}, got {str(got)[:60]!r}")
+    _check_depth(doc, source)
     version = doc.get("format_version")
-    if version != FORMAT_VERSION:
-        raise ModelError(f"{where(source)}expected model format version {FORMAT_VERSION}, got {version!r}")
-    if doc.get("kind") == "kes-halfdiff":
-        from kesbrdf.halfdiff import from_dict
-
-        return from_dict(doc, source)
-    arrays = doc.get("arrays", {})
-    missing = [a for a in ARRAYS if a not in arrays]
+    if not _is_int(version) or version != FORMAT_VERSION:
+        raise ModelError(f"{where(source)}expected model format version {FORMAT_VERSION}, got {repr(version)[:40]}")
+    cls = kind_class(doc.get("kind", "kes"), source)
+    arrays_doc = doc.get("arrays", {})
+    if not isinstance(arrays_doc, dict):
+        raise ModelError(f"{where(source)}arrays: expected a JSON object, got {type(arrays_doc).__name__}")
+    missing = [a for a in cls.array_names if a not in arrays_doc]
     if missing:
-        raise ModelError(f"{where(source)}missing array(s) {', '.join(missing)}")
-    arr = {name: decode_array(arrays[name], name, source) for name in ARRAYS}
-    channels = tuple(doc.get("channels", ()))
-    n_phi, n_gamma = arr["phi_grid"].size, arr["gamma_grid"].size
-    if arr["table"].shape != (n_phi, n_gamma, len(channels)) or arr["body"].shape != (len(channels),):
-        raise ModelError(
-            f"{where(source)}expected table of shape ({n_phi}, {n_gamma}, {len(channels)}) and body of "
-            f"shape ({len(channels)},), got {arr['table'].shape} and {arr['body'].shape}"
-        )
-    return Model(
-        channels=channels,
-        kind=doc.get("kind", "kes"),
-        parameters=doc.get("parameters", {}),
-        diagnostics=doc.get("diagnostics", {}),
-        input_info=doc.get("input", {}),
-        kesbrdf_version=doc.get("kesbrdf_version", __version__),
-        **arr,
-    )
+        raise ModelError(f"{where(source)}missing array(s) {', '.join(missing)} of a {cls.kind!r} model")
+    channels = doc.get("channels")
+    if not isinstance(channels, list) or not channels or not all(isinstance(c, str) and c for c in channels):
+        raise ModelError(f"{where(source)}channels: expected a non-empty list of names, got {str(channels)[:60]}")
+    if len(set(channels)) != len(channels):
+        raise ModelError(f"{where(source)}channels: expected distinct names, got {channels[:8]}")
+    shared = {"channels": tuple(channels)}
+    for key, attr in (("input", "input_info"), ("parameters", "parameters"), ("diagnostics", "diagnostics")):
+        value = doc.get(key, {})
+        if not isinstance(value, dict):
+            raise ModelError(f"{where(source)}{key}: expected a JSON object, got {type(value).__name__}")
+        shared[attr] = value
+    version_text = doc.get("kesbrdf_version", __version__)
+    if not isinstance(version_text, str):
+        raise ModelError(f"{where(source)}kesbrdf_version: expected text, got {type(version_text).__name__}")
+    shared["kesbrdf_version"] = version_text
+    total = 0
+    arrays = {}
+    for name, entry in arrays_doc.items():
+        arrays[name] = decode_array(entry, name, source)
+        total += arrays[name].size
+        if total > MAX_ARRAY_ELEMENTS:
+            raise ModelError(f"{where(source)}expected at most {MAX_ARRAY_ELEMENTS} array elements in all")
+    fields = {k: v for k, v in doc.items() if k not in ("format", "format_version", "kind", "kesbrdf_version",
+                                                         "arrays", *_SHARED)}
+    return cls.from_payload(fields, arrays, shared, source)

@@ -56,11 +56,14 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
+from kesbrdf.kinds import require_kind
 from kesbrdf.render import sampling as _sampling
 
 __all__ = ["KesBSDF", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
 
 MAPPINGS = ("deviation", "halfvector")
+#: Model kinds the plugin evaluates (the ``kes`` table).
+SUPPORTED_KINDS = ("kes",)
 SAMPLINGS = ("lobe", "cosine")
 #: Projected length below which the azimuth falls back to the plane of incidence
 #: (float32 counterpart of kesbrdf.brdf.AZIMUTH_EPS).
@@ -89,8 +92,7 @@ def parse_rgb(value, name: str = "colour") -> np.ndarray:
 
 def model_rgb(model, source=None):
     """(table (n_phi, n_gamma, 3), body (3,)) of a model as RGB."""
-    if getattr(model, "kind", "kes") != "kes":
-        raise ModelError(f"{where(source)}the renderer reads models of kind 'kes', got {model.kind!r}")
+    require_kind(model, SUPPORTED_KINDS, "the renderer", source)
     c = model.table.shape[-1]
     if c == 1:
         return np.repeat(model.table, 3, axis=-1), np.repeat(model.body, 3)
