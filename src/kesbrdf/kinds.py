@@ -176,6 +176,11 @@ class ReflectanceModel:
     def usable_rows(cls, measurement):  # pragma: no cover
         raise NotImplementedError
 
+    @classmethod
+    def auto_skip(cls, measurement) -> str | None:
+        """Why ``kind="auto"`` should not consider this kind for ``measurement`` (or None)."""
+        return None
+
     def save(self, path):
         """Write the model file atomically (:mod:`kesbrdf.io.model_file`)."""
         from kesbrdf.io.model_file import save_model

@@ -671,6 +671,14 @@ class ScatteredFit:
         return fit_scattered(measurement, **options)
 
     @classmethod
+    def auto_skip(cls, measurement):
+        """Why ``kind="auto"`` does not consider this fit, or None: in-plane data only is
+        the KES kinds' (a least-squares fit of a few planes would invent the rest)."""
+        if len(measurement) and bool(np.all(measurement.is_in_plane)):
+            return "in-plane data only: the KES kinds apply (ask for kind 'scattered' to force it)"
+        return None
+
+    @classmethod
     def usable_rows(cls, measurement):
         """(mask, reason): finite rows with both directions above the horizon."""
         m = measurement

@@ -40,10 +40,10 @@ class _Stages:
 
 
 def run(args) -> int:
+    import kesbrdf
     from kesbrdf import demo_data
     from kesbrdf.diagnostics import diagnose
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
-    from kesbrdf.model import fit
     from kesbrdf.validation import compare_reference, leave_one_orientation_out, validate
     from kesbrdf._atomic import write_text
 
@@ -68,7 +68,10 @@ def run(args) -> int:
 
     # 2-3. interpolate + model
     say(f"fit: {len(m)} samples, channels {', '.join(m.channels)}")
-    model = fit(m, fallback="log")
+    model, report = kesbrdf.fit(m)
+    stderr(f"    {report.summary()}")
+    for w in report.warnings:
+        stderr(f"    warning: {w}")
     model_path = out / "model.kes.json"
     model.save(model_path)
 
@@ -78,8 +81,8 @@ def run(args) -> int:
         "measurement": str(meas_path),
         "model": str(model_path),
         "round_trip": validate(model, m),
-        "leave_one_orientation_out": leave_one_orientation_out(m, fallback="log"),
-        "reference": compare_reference(m, reference, fallback="log") if reference is not None else None,
+        "leave_one_orientation_out": leave_one_orientation_out(m),
+        "reference": compare_reference(m, reference) if reference is not None else None,
         "diagnostics": diagnose(model),
     }
     write_text(out / "validation.json", json.dumps(summary, indent=1) + "\n")

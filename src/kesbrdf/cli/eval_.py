@@ -17,7 +17,9 @@ def add_arguments(p):
     p.add_argument("model", help="model file")
     p.add_argument("--pairs", required=True, help="CSV with theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg")
     p.add_argument("-o", "--output", required=True, help="CSV to write (pairs + f_r per channel, 1/sr)")
-    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector"), default="deviation")
+    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector", "halfdiff"), default=None,
+                   help="direction mapping (default: the model kind's own, deviation for kes); "
+                   "one the model's kind lacks is an error")
 
 
 def read_pairs(path):
@@ -60,16 +62,17 @@ def run(args) -> int:
     from kesbrdf.model import load
 
     model = load(args.model)
+    mapping = model.check_mapping(args.mapping)  # before reading the pairs: fail fast
     pairs = read_pairs(args.pairs)
     rad = np.radians(pairs)
     wi = spherical_to_cartesian(rad[:, 0], rad[:, 1])
     wr = spherical_to_cartesian(rad[:, 2], rad[:, 3])
-    f = evaluate(model, wi, wr, args.mapping)
+    f = evaluate(model, wi, wr, mapping)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(list(PAIR_COLUMNS) + list(model.channels))
     for p, v in zip(pairs, f):
         w.writerow([repr(float(x)) for x in p] + [repr(float(x)) for x in v])
     write_text(args.output, buf.getvalue())
-    stderr(f"wrote {len(pairs)} BRDF values ({args.mapping} mapping) to {args.output}")
+    stderr(f"wrote {len(pairs)} BRDF values ({mapping} mapping) to {args.output}")
     return 0

@@ -22,8 +22,8 @@ def add_arguments(p):
     p.add_argument("--format", choices=("png", "svg", "pdf"), default="png",
                    help="file format inside an output folder (default png)")
     p.add_argument("--channel", help="channel name or index (default: the only one, or the mean)")
-    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector"), default="deviation",
-                   help="mapping used to evaluate the model (default deviation)")
+    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector", "halfdiff"), default=None,
+                   help="mapping used to evaluate the model (default: the model kind's own, deviation for kes)")
     p.add_argument("--gamma-deg", metavar="LIST", default="-60,0",
                    help="signed gamma values of Fig. 4, degrees, comma separated; write "
                         "--gamma-deg=-60,0 when the list starts with a minus (default -60,0)")

@@ -16,8 +16,8 @@ def add_arguments(p):
     p.add_argument("--reference-params", metavar="JSON", help="reference parameters as JSON")
     p.add_argument("-o", "--output", required=True, help="report file (.html)")
     p.add_argument("--title", default=None, help="report title (default: from the model's sample name)")
-    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector"), default="deviation",
-                   help="mapping used to evaluate the model (default deviation)")
+    p.add_argument("--mapping", choices=("paper", "deviation", "halfvector", "halfdiff"), default=None,
+                   help="mapping used to evaluate the model (default: the model kind's own, deviation for kes)")
     p.add_argument("--figures-dir", help="also save each figure as a PNG in this folder")
 
 

@@ -1050,6 +1050,18 @@ def _albedo_grid(diagnostics):
     return t, p, a.reshape(t.size, p.size)
 
 
+#: Model kinds each figure can draw (``make_figure`` gives a one-line error for the
+#: rest): Fig. 3 and 5 read the ``kes`` table ρ(φ, γ) itself; Fig. 4, 6 and the albedo
+#: evaluate the BRDF, which every kind can.
+FIGURE_KINDS = {
+    "3a": ("kes",),
+    "3b": ("kes",),
+    "4": ("kes", "kes-halfdiff"),
+    "5": ("kes",),
+    "6": ("kes", "kes-halfdiff"),
+    "albedo": ("kes", "kes-halfdiff"),
+}
+
 #: Figure name -> builder; every builder takes ``model=, measurement=, reference=``.
 FIGURES = {
     "3a": figure_3a,
@@ -1065,4 +1077,10 @@ def make_figure(name: str, model=None, measurement=None, reference=None, **kwarg
     builders = dict(FIGURES, albedo=figure_albedo)
     if name not in builders:
         raise KesbrdfError(f"expected a figure in {', '.join(builders)}, got {name!r}")
+    if model is not None:
+        from kesbrdf.kinds import require_kind
+
+        require_kind(model, FIGURE_KINDS[name], f"figure {name}")
+        if "mapping" in kwargs:
+            kwargs["mapping"] = model.check_mapping(kwargs["mapping"])
     return builders[name](model=model, measurement=measurement, reference=reference, **kwargs)

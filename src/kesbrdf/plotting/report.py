@@ -244,13 +244,17 @@ def _render(v, path: tuple = (), depth: int = 0) -> str:
 def _model_summary(model) -> dict:
     if model is None:
         return {}
-    gamma_max = float(np.max(model.gamma_grid))
-    return {
-        "kind": getattr(model, "kind", "kes"),
+    out = {
+        "kind": model.kind,
         "channels": ", ".join(model.channels),
         "orientations": model.parameters.get("orientations"),
-        "table (n_phi × n_gamma)": f"{len(model.phi_grid)} × {len(model.gamma_grid)}",
-        "γ_max (°)": round(math.degrees(gamma_max), 6),
+        "table shape": " × ".join(str(n) for n in np.shape(model.table)),
+    }
+    if model.kind == "kes":
+        out["table (n_phi × n_gamma)"] = f"{len(model.phi_grid)} × {len(model.gamma_grid)}"
+        out["γ_max (°)"] = round(math.degrees(float(np.max(model.gamma_grid))), 6)
+    return {
+        **out,
         "body c (1/sr)": np.asarray(model.body, float).tolist(),
         "input": (model.input_info or {}).get("name"),
         "sample": (model.input_info or {}).get("sample"),
@@ -481,7 +485,7 @@ def _matplotlib_version() -> str | None:
     return matplotlib.__version__
 
 
-def collect(model, measurement=None, reference=None, mapping: str = "deviation") -> tuple[dict, dict]:
+def collect(model, measurement=None, reference=None, mapping: str | None = None) -> tuple[dict, dict]:
     """Compute the report's metrics and diagnostics with :mod:`kesbrdf.validation` and
     :mod:`kesbrdf.diagnostics`.
 
@@ -496,7 +500,10 @@ def collect(model, measurement=None, reference=None, mapping: str = "deviation")
     from kesbrdf import diagnostics as diag
     from kesbrdf import validation
 
-    fit_kwargs = {"fallback": model.parameters.get("fallback", "error")} if model is not None else {}
+    fit_kwargs = {"fallback": model.parameters.get("fallback", "log")} if model is not None else {}
+    if model is not None:
+        mapping = model.check_mapping(mapping)
+    kes_mapping = mapping if mapping in ("deviation", "halfvector", "paper") else "deviation"
     metrics: dict = {}
 
     def attempt(key, fn, *args, **kwargs):
@@ -507,10 +514,11 @@ def collect(model, measurement=None, reference=None, mapping: str = "deviation")
 
     if measurement is not None:
         attempt("round_trip", validation.validate, model, measurement, mapping=mapping)
+        # these two fit kes models (and baselines) from the measurement
         attempt("leave_one_orientation_out", validation.leave_one_orientation_out, measurement,
-                mapping=mapping, **fit_kwargs)
+                mapping=kes_mapping, **fit_kwargs)
         if reference is not None:
             attempt("reference", validation.compare_reference, measurement, reference,
-                    mapping=mapping, **fit_kwargs)
+                    mapping=kes_mapping, **fit_kwargs)
     diagnostics = diag.diagnose(model, mapping=mapping)
     return metrics, diagnostics

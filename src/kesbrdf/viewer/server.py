@@ -10,7 +10,7 @@ default and serves
   "measurement": <see :func:`measurement_to_json`> or null}``;
 * ``POST /api/fit?name=<file name>[&fallback=error|log]`` with the raw CSV bytes as body:
   reads it with :func:`kesbrdf.io.measurement_csv.read_measurement`, fits it with
-  :func:`kesbrdf.model.fit`, keeps the result in memory and answers like ``/api/model``.
+  :func:`kesbrdf.fit` (kind chosen from the data, as ``kesbrdf fit``), keeps the result in memory and answers like ``/api/model``.
 
 Errors come back as ``{"error": "<one line>"}`` with a 4xx status (the same message
 the CLI prints for the same input); the server keeps running.  Request bodies larger
@@ -177,8 +177,8 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
     ``kesbrdf fit name.csv`` would print them.
     """
     try:
+        from kesbrdf.fitting import fit
         from kesbrdf.io.measurement_csv import read_measurement
-        from kesbrdf.model import fit
     except ImportError as exc:  # pragma: no cover - core always ships these
         raise ModelError(f"fitting is not available in this installation: {exc}") from None
     safe = _safe_upload_name(name)
@@ -188,8 +188,8 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
         prefix = str(Path(tmp)) + os.sep
         try:
             measurement = read_measurement(csv_path)
-            kwargs = {} if fallback is None else {"fallback": fallback}
-            model = fit(measurement, **kwargs)
+            # the same entry point and defaults as `kesbrdf fit`; fallback=error is --strict
+            model, _report = fit(measurement, strict=fallback == "error")
             out = Path(tmp) / (Path(safe).stem + ".kes.json")
             model.save(out)
             model_doc = json.loads(out.read_text(encoding="utf-8"))

@@ -1,0 +1,211 @@
+"""``kesbrdf.fit(measurement, kind="auto", **options)``: the one fitting entry point.
+
+The CLI (``kesbrdf fit``), the viewer's upload and the demo all call :func:`fit`.
+``kind="auto"`` picks the fitter that uses every row of the measurement, trying
+:data:`kesbrdf.kinds.AUTO_CANDIDATES` in order (docs/models.md):
+
+* the paper's protocol (one incidence line at ψ = 0, 45, 90, 135°) → ``kes``;
+* several incidence angles per orientation → ``kes-halfdiff``;
+* general (out-of-plane) geometries → ``scattered`` (a ``kes`` model fitted by least
+  squares, with its sample-frame warp recorded).
+
+When no candidate uses every row, the one that uses the most wins (the earlier on a
+tie).  The library never prints: the choice, the reason, the rows used and the rows
+not used (how many, and why) come back in a :class:`FitReport`, together with the
+model's one-line warnings (e.g. the log fallback where K(φ) ≤ 0).
+
+Options are passed to the chosen fitter; an option it does not accept is a one-line
+:class:`~kesbrdf.errors.KesbrdfError` naming the kinds that do accept it.  ``strict``
+(all kinds) turns the K(φ) ≤ 0 fallback back into an error (``fallback="error"``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kesbrdf.errors import KesbrdfError, MeasurementError
+from kesbrdf.kinds import AUTO_CANDIDATES, fitter_class, known_fitters
+
+__all__ = ["fit", "FitReport", "choose_fitter"]
+
+
+@dataclass
+class FitReport:
+    """What :func:`fit` did: the fitter chosen, why, and which rows it used.
+
+    Attributes
+    ----------
+    kind : str
+        Kind of the model built (``"kes"``, ``"kes-halfdiff"``, ...).
+    fitter : str
+        The fitter used (a kind's name, or ``"scattered"``).
+    reason : str
+        One line: why this fitter (``"asked for"`` when ``kind`` was given).
+    rows_total, rows_used : int
+    rows_unused : str
+        One line: how many rows were not used and why ("" when all were used).
+    candidates : dict
+        Rows each candidate could use (``kind="auto"`` only).
+    warnings : list of str
+        The model's one-line warnings.
+    """
+
+    kind: str
+    fitter: str
+    reason: str
+    rows_total: int
+    rows_used: int
+    rows_unused: str = ""
+    candidates: dict = field(default_factory=dict)
+    warnings: list = field(default_factory=list)
+
+    def summary(self) -> str:
+        """One line for a terminal: kind, why, rows."""
+        text = f"kind {self.kind}"
+        if self.fitter != self.kind:
+            text += f" ({self.fitter} fit)"
+        text += f": {self.reason}; uses {self.rows_used} of {self.rows_total} rows"
+        if self.rows_unused:
+            text += f"; not used: {self.rows_unused}"
+        return text
+
+    def to_dict(self) -> dict:
+        return {
+            "kind": self.kind,
+            "fitter": self.fitter,
+            "reason": self.reason,
+            "rows_total": self.rows_total,
+            "rows_used": self.rows_used,
+            "rows_unused": self.rows_unused,
+            "candidates": dict(self.candidates),
+            "warnings": list(self.warnings),
+        }
+
+
+def choose_fitter(measurement, candidates=None):
+    """(name, mask, reason-for-unused, why, {name: rows usable}) of the automatic choice."""
+    m = measurement
+    names = list(AUTO_CANDIDATES if candidates is None else candidates)
+    n = len(m)
+    best = None
+    counts = {}
+    notes = {}
+    for name in names:
+        cls = fitter_class(name)
+        skip = getattr(cls, "auto_skip", None)
+        reason = skip(m) if skip is not None else None
+        if reason:
+            counts[name], notes[name] = 0, reason
+            continue
+        mask, why_not = cls.usable_rows(m)
+        used = int(np.count_nonzero(mask))
+        counts[name] = used
+        notes[name] = why_not
+        if best is None or used > best[2]:
+            best = (name, mask, used, why_not)
+        if used == n and n > 0:
+            break
+    if best is None or best[2] == 0:
+        detail = "; ".join(f"{k}: {v}" for k, v in notes.items())
+        raise MeasurementError(f"{m.source or 'measurement'}: no model kind can use this measurement: {detail}")
+    name, mask, used, why_not = best
+    if used == n:
+        why = f"uses every row ({_protocol(name)})"
+    else:
+        others = ", ".join(f"{k} {v}" for k, v in counts.items() if k != name)
+        why = f"uses the most rows ({used} of {n}; {others})"
+    return name, mask, why_not, why, counts
+
+
+def _protocol(name: str) -> str:
+    return {
+        "kes": "the paper's protocol: one incidence line per orientation",
+        "kes-halfdiff": "several incidence angles per orientation",
+        "scattered": "general geometries",
+    }.get(name, name)
+
+
+def fit(measurement, kind: str = "auto", strict: bool = False, **options):
+    """Fit a model to ``measurement``; returns ``(model, FitReport)``.
+
+    Parameters
+    ----------
+    measurement : kesbrdf.measurement.Measurement
+    kind : str
+        ``"auto"`` (module docstring) or a fitter name: ``"kes"``, ``"kes-halfdiff"``,
+        ``"scattered"``, or any other in :data:`kesbrdf.kinds.FIT_MODULES`.
+    strict : bool
+        Make the K(φ) ≤ 0 log fallback an error (``fallback="error"``); only for the
+        kinds that have that option.
+    **options
+        Passed to the fitter; an option it does not accept is an error.
+
+    Returns
+    -------
+    model : kesbrdf.kinds.ReflectanceModel
+    report : FitReport
+
+    >>> from kesbrdf.gonio import measure
+    >>> from kesbrdf.references.ward import AnisotropicWard
+    >>> model, report = fit(measure(AnisotropicWard(0.2, 0.3), protocol="dense", step_deg=10))
+    >>> report.kind, report.rows_used == report.rows_total
+    ('kes-halfdiff', True)
+    """
+    m = measurement
+    if kind == "auto":
+        name, mask, why_not, why, counts = choose_fitter(m)
+    else:
+        if not isinstance(kind, str) or kind not in known_fitters():
+            raise KesbrdfError(f"expected kind one of {', '.join(('auto',) + known_fitters())}, got {kind!r}")
+        mask, why_not = fitter_class(kind).usable_rows(m)
+        name, why, counts = kind, "asked for", {}
+    cls = fitter_class(name)
+    _check_options(name, cls, options, strict)
+    if strict:
+        options["fallback"] = "error"
+    model = cls.fit_measurement(m, **options)
+    used = int(np.count_nonzero(mask))
+    unused = len(m) - used
+    report = FitReport(
+        kind=model.kind,
+        fitter=name,
+        reason=why,
+        rows_total=len(m),
+        rows_used=used,
+        rows_unused=f"{unused} row(s): {why_not}" if unused else "",
+        candidates=counts,
+        warnings=list(getattr(model, "warnings", [])),
+    )
+    if isinstance(model.diagnostics, dict):
+        model.diagnostics["fit_report"] = report.to_dict()
+    return model, report
+
+
+def _check_options(name, cls, options, strict) -> None:
+    accepted = set(cls.fit_options)
+    unknown = sorted(set(options) - accepted)
+    if strict:
+        if "fallback" not in accepted:
+            raise KesbrdfError(f"--strict (strict=True) does not apply to the {name!r} fit: it has no K(phi) fallback")
+        if options.get("fallback", "error") != "error":
+            raise KesbrdfError(f"strict=True contradicts fallback={options['fallback']!r}")
+    if not unknown:
+        return
+    where_ok = {}
+    for other in known_fitters():
+        try:
+            other_options = fitter_class(other).fit_options
+        except Exception:  # a fitter whose optional dependency is missing
+            continue
+        for opt in unknown:
+            if opt in other_options:
+                where_ok.setdefault(opt, []).append(other)
+    parts = [
+        f"{opt} (accepted by {', '.join(where_ok[opt])})" if opt in where_ok else f"{opt} (not an option of any kind)"
+        for opt in unknown
+    ]
+    raise KesbrdfError(
+        f"option(s) {', '.join(parts)} do not apply to kind {name!r}; it accepts {', '.join(cls.fit_options)}"
+    )
