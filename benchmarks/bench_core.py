@@ -1,7 +1,14 @@
-"""Core benchmarks: BRDF evaluations/s per mapping, fit times, KES vs baselines."""
+"""Core benchmarks: BRDF evaluations/s per mapping, fit times, KES vs baselines.
+
+``brdf_vs_copy_*``: the time of ``evaluate`` over the time of ``np.copy`` of its two
+input arrays (same pairs), per mapping; ``brdf_peak_memory_1e7``: tracemalloc's peak of
+the allocations made inside ``evaluate`` for 1e7 pairs, against the bytes of the
+inputs and the output (issue 8 asks for about 2× input + output at most).
+"""
 
 from __future__ import annotations
 
+import tracemalloc
 
 import numpy as np
 
@@ -27,6 +34,25 @@ REFERENCES = {
 
 
 
+def peak_memory(model, n: int = 10_000_000) -> dict:
+    """Peak bytes allocated inside ``evaluate`` for ``n`` random pairs (tracemalloc)."""
+    rng = np.random.default_rng(5)
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    tracemalloc.start()
+    tracemalloc.reset_peak()
+    base = tracemalloc.get_traced_memory()[0]
+    f = evaluate(model, wi, wr)
+    peak = tracemalloc.get_traced_memory()[1] - base
+    tracemalloc.stop()
+    io_bytes = wi.nbytes + wr.nbytes + f.nbytes
+    return {
+        "brdf_peak_memory_1e7_bytes": int(peak),
+        "brdf_io_bytes_1e7": int(io_bytes),
+        "brdf_peak_over_io_1e7": peak / io_bytes,
+    }
+
+
 def run() -> dict:
     rng = np.random.default_rng(0)
     ref = REFERENCES["ward_0.10_0.20"]
@@ -36,9 +62,12 @@ def run() -> dict:
     wi = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
     wr = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
     out = {}
+    t_copy = best_of(lambda: (np.copy(wi), np.copy(wr)), 5)
     for mapping in MAPPINGS:
         t = best_of(lambda: evaluate(model, wi, wr, mapping), 3)
         out[f"brdf_evals_per_s_{mapping}"] = n / t
+        out[f"brdf_vs_copy_{mapping}"] = t / t_copy
+    out.update(peak_memory(model))
     t_ref = best_of(lambda: ref(wi, wr), 3)
     out["brdf_evals_per_s_ward_reference"] = n / t_ref
     out["fit_s_paper_116"] = best_of(lambda: fit(m), 5)

@@ -93,3 +93,88 @@ def test_energy_below_one_for_a_physical_reference(model):
     d = diagnose(model)
     assert d["albedo"]["above_one"] == []
     assert d["reciprocity_error"] < 1e-12
+
+
+# -- the public API at its edges (issue 8) ----------------------------------------------
+#: Agreement with kesbrdf 0.1.0's evaluation: only round-off separates the optimised
+#: arithmetic (flattened np.take lookup, no np.cross/hypot/mod) from the old one.
+V010_RTOL = 1e-12
+
+
+@pytest.mark.parametrize("mapping", MAPPINGS)
+def test_identical_to_the_v010_implementation(model, rng, mapping):
+    import brdf_v010
+
+    from kesbrdf.mappings import COS_EPS
+
+    n = 50_000
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(0, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    keep = (wi[:, 2] > COS_EPS) & (wr[:, 2] > COS_EPS)  # 0.1.0 had no horizon epsilon
+    new = evaluate(model, wi[keep], wr[keep], mapping)
+    old = brdf_v010.evaluate(model, wi[keep], wr[keep], mapping)
+    np.testing.assert_allclose(new, old, rtol=V010_RTOL, atol=V010_RTOL * np.max(old))
+
+
+@pytest.mark.parametrize("mapping", MAPPINGS)
+def test_horizon_gives_exact_zero_and_grazing_stays_bounded(model, mapping):
+    from kesbrdf.mappings import COS_EPS
+
+    wi = spherical_to_cartesian(np.radians(90.0), 0.3)  # cos = 6e-17: at the horizon
+    wr = spherical_to_cartesian(np.radians(30.0), 2.0)
+    assert np.all(evaluate(model, wi, wr, mapping) == 0.0)
+    assert np.all(evaluate(model, wr, wi, mapping) == 0.0)
+    for tiny in (1e-300, 5e-324, 1e-7):  # denormal and sub-epsilon cosines
+        assert np.all(evaluate(model, [1.0, 0.0, tiny], wr, mapping) == 0.0)
+    # just above the epsilon: finite and bounded by (c + q_max / COS_EPS) / sin_beta_min
+    theta = np.arccos(np.geomspace(2 * COS_EPS, 1e-2, 50))
+    wi = spherical_to_cartesian(theta, np.pi)
+    wr = spherical_to_cartesian(theta, 0.0)  # grazing mirror pairs: the worst case
+    f = evaluate(model, wi, wr, mapping)
+    bound = (model.body.max() + model.table.max()) / COS_EPS
+    if mapping == "paper":
+        from kesbrdf.mappings import PAPER_MIN_SIN_BETA
+
+        bound /= PAPER_MIN_SIN_BETA
+    assert np.all(np.isfinite(f)) and np.all(f >= 0) and np.all(f <= bound)
+
+
+@pytest.mark.parametrize("mapping", MAPPINGS)
+def test_unnormalised_directions_give_the_normalised_value(model, random_pairs, mapping):
+    wi, wr = random_pairs
+    ref = evaluate(model, wi, wr, mapping)
+    for scale_i, scale_r in ((3.7, 0.01), (1e-300, 1e300), (1e150, 2e-160)):
+        np.testing.assert_allclose(evaluate(model, wi * scale_i, wr * scale_r, mapping), ref, rtol=1e-12)
+    # the unnormalised mirror pair of issue 8: 0.159 1/sr, not 151.8
+    mirror_i = np.array([-np.sin(0.4), 0.0, np.cos(0.4)])
+    mirror_r = np.array([np.sin(0.4), 0.0, np.cos(0.4)])
+    np.testing.assert_allclose(evaluate(model, 10 * mirror_i, 0.1 * mirror_r, mapping),
+                               evaluate(model, mirror_i, mirror_r, mapping), rtol=1e-12)
+
+
+def test_non_finite_gives_nan_and_finite_input_never_does(model, rng):
+    wr = np.array([0.2, 0.1, 0.9])
+    for bad in ([np.nan, 0, 1], [np.inf, 0, 1], [0, 0, -np.inf]):
+        assert np.all(np.isnan(evaluate(model, bad, wr)))
+    # a random mix of finite vectors: zero vectors, below the horizon, huge and tiny
+    v = rng.normal(size=(4000, 3)) * 10.0 ** rng.integers(-300, 300, size=(4000, 1))
+    v[::97] = 0.0
+    for mapping in MAPPINGS:
+        f = evaluate(model, v, v[::-1], mapping)
+        assert np.all(np.isfinite(f)) and np.all(f >= 0)
+
+
+def test_chunked_evaluation_matches_one_chunk(model, random_pairs):
+    from kesbrdf import mappings
+
+    wi, wr = random_pairs
+    whole = mappings.evaluate_pairs(model.evaluate_unit, wi, wr, model.n_channels, "deviation", chunk=10**9)
+    small = mappings.evaluate_pairs(model.evaluate_unit, wi, wr, model.n_channels, "deviation", chunk=7)
+    np.testing.assert_array_equal(whole, small)
+
+
+def test_unsupported_mapping_is_a_one_line_error(model):
+    from kesbrdf.errors import ModelError
+
+    with pytest.raises(ModelError, match="a 'kes' model supports mapping 'deviation', 'halfvector', 'paper'; got 'halfdiff'"):
+        evaluate(model, [0, 0, 1.0], [0, 0, 1.0], "halfdiff")

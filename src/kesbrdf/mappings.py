@@ -227,7 +227,8 @@ def unit_rows(v: np.ndarray):
     Rows whose squared length under- or overflows are scaled by their largest
     component first, so any finite non-zero vector is normalised correctly.
     """
-    n2 = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        n2 = v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2]
     plain = (n2 > 1e-280) & (n2 < 1e280)
     if plain.all():
         return v / np.sqrt(n2)[:, None], plain
