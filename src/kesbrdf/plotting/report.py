@@ -29,7 +29,7 @@ import numpy as np
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
 from kesbrdf.errors import KesbrdfError
-from kesbrdf.plotting.save import _jsonable, describe, figure_bytes, provenance, save_figure
+from kesbrdf.plotting.save import jsonable, describe, figure_bytes, provenance, save_figure
 
 __all__ = ["REPORT_FIGURES", "build_report", "write_report", "collect"]
 
@@ -163,7 +163,7 @@ def _array_html(v, path: tuple) -> str:
     try:
         a = np.asarray(v, float)
     except (TypeError, ValueError):
-        return f"<pre>{html.escape(json.dumps(_jsonable(v)))}</pre>"
+        return f"<pre>{html.escape(json.dumps(jsonable(v)))}</pre>"
     flag = ' class="flag"' if _flagged(path, a.ravel().tolist()) else ""
     finite = a[np.isfinite(a)]
     summary = (
@@ -181,7 +181,7 @@ def _array_html(v, path: tuple) -> str:
             rows.append(f"<tr><th>{i}</th>{''.join(cells)}</tr>")
         header = "<tr><th></th>" + "".join(f"<th>{j}</th>" for j in range(a.shape[1])) + "</tr>"
         return summary + f"<table>{header}{''.join(rows)}</table>"
-    return summary + f"<details><summary>values</summary><pre>{html.escape(json.dumps(_jsonable(v)))}</pre></details>"
+    return summary + f"<details><summary>values</summary><pre>{html.escape(json.dumps(jsonable(v)))}</pre></details>"
 
 
 def _value_html(v, path: tuple) -> str:
@@ -202,7 +202,7 @@ def _value_html(v, path: tuple) -> str:
 
 def _render(v, path: tuple = (), depth: int = 0) -> str:
     """HTML for any plain data value."""
-    v = _jsonable(v)
+    v = jsonable(v)
     if isinstance(v, dict):
         if not v:
             return "<p>—</p>"

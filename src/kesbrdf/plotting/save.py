@@ -28,6 +28,7 @@ from kesbrdf.errors import KesbrdfError
 
 __all__ = [
     "FORMATS",
+    "jsonable",
     "provenance",
     "describe",
     "figure_provenance",
@@ -43,14 +44,14 @@ FORMATS = ("png", "svg", "pdf")
 _PROVENANCE_ATTR = "kesbrdf_provenance"
 
 
-def _jsonable(value):
+def jsonable(value):
     """Plain-JSON version of numbers, arrays, tuples and nested dicts."""
     if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
+        return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
+        return [jsonable(v) for v in value]
     if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
+        return jsonable(value.tolist())
     if isinstance(value, np.generic):
         return value.item()
     if isinstance(value, float) and not np.isfinite(value):
@@ -129,12 +130,12 @@ def provenance(model=None, measurement=None, reference=None, **parameters) -> di
         "model_parameters": dict(getattr(model, "parameters", None) or {}),
         "parameters": parameters,
     }
-    return _jsonable(record)
+    return jsonable(record)
 
 
 def attach_provenance(fig, record: dict):
     """Store ``record`` on ``fig`` so :func:`save_figure` writes it; returns ``fig``."""
-    setattr(fig, _PROVENANCE_ATTR, _jsonable(record))
+    setattr(fig, _PROVENANCE_ATTR, jsonable(record))
     return fig
 
 
@@ -178,7 +179,7 @@ def _metadata(fmt: str, record: dict) -> dict:
 def figure_bytes(fig, fmt: str = "png", record: dict | None = None, dpi: int | None = None) -> bytes:
     """Render ``fig`` to bytes of ``fmt`` with its provenance metadata."""
     rec = figure_provenance(fig)
-    rec.update(_jsonable(record or {}))
+    rec.update(jsonable(record or {}))
     rec.setdefault("kesbrdf_version", __version__)
     import matplotlib
 

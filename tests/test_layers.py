@@ -1,0 +1,150 @@
+"""The package's import graph respects its layers (DESIGN §6, docs/models.md).
+
+Every module of ``src/kesbrdf`` is parsed with :mod:`ast` (imports inside functions
+count too: a lazy import is still a dependency), and the test fails when
+
+* a module imports one of a higher layer, or
+* a module imports another module's private (underscore) name — private *modules*
+  such as ``kesbrdf._atomic`` or ``kesbrdf.cli._common`` are fine, and so are
+  private names within one module.
+
+Layers, lowest first.  DESIGN §6 reads as data flow (io → measurement → kes → model
+→ brdf → validation → apps); in the import graph the data type ``measurement`` sits
+below the readers that build it.  ``mappings`` (direction mappings) is at the bottom,
+``kinds`` (the registry) beside the model-file codec that looks it up,
+``references`` (analytic BRDFs) and ``gonio``/``acquisition`` (the virtual and the
+image-based instruments) with the readers; ``fitting`` (``kesbrdf.fit``) and the
+package root with ``brdf``; ``export`` and ``batch`` with the applications.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+PACKAGE = SRC / "kesbrdf"
+
+#: (layer name, module-name prefixes).  A module belongs to the first layer with the
+#: longest matching prefix.
+LAYERS = [
+    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry",
+              "kesbrdf.mappings"]),
+    ("measurement", ["kesbrdf.measurement"]),
+    ("io", ["kesbrdf.io", "kesbrdf.kinds", "kesbrdf.references", "kesbrdf.gonio", "kesbrdf.acquisition",
+            "kesbrdf.demo_data"]),
+    ("kes", ["kesbrdf.kes"]),
+    ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior"]),
+    ("brdf", ["kesbrdf.brdf", "kesbrdf.fitting", "kesbrdf"]),
+    ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare"]),
+    ("apps", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.cli", "kesbrdf.viewer", "kesbrdf.cloth",
+              "kesbrdf.export", "kesbrdf.batch"]),
+]
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(SRC).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def is_module(name: str) -> bool:
+    rel = Path(*name.split("."))
+    return (SRC / rel).with_suffix(".py").is_file() or (SRC / rel / "__init__.py").is_file()
+
+
+def layer_of(name: str) -> int:
+    best, best_len = None, -1
+    for rank, (_, prefixes) in enumerate(LAYERS):
+        for p in prefixes:
+            if (name == p or name.startswith(p + ".")) and len(p) > best_len:
+                best, best_len = rank, len(p)
+    if best is None:
+        raise AssertionError(f"module {name} is in no layer: add it to LAYERS in tests/test_layers.py")
+    return best
+
+
+def resolve(module: str, node: ast.ImportFrom) -> str:
+    if node.level:
+        base = module.split(".")
+        if not (PACKAGE / Path(*base[1:]) / "__init__.py").is_file() or module == "kesbrdf":
+            base = base[:-1]
+        base = base[: len(base) - (node.level - 1)]
+        return ".".join(base + ([node.module] if node.module else []))
+    return node.module or ""
+
+
+def imports(path: Path):
+    """(imported module, private names taken from it, line) of one source file."""
+    module = module_name(path)
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.split(".")[0] == "kesbrdf":
+                    yield alias.name, [], node.lineno
+        elif isinstance(node, ast.ImportFrom):
+            target = resolve(module, node)
+            if target.split(".")[0] != "kesbrdf":
+                continue
+            names = [a.name for a in node.names]
+            submodules = [n for n in names if is_module(f"{target}.{n}")]
+            for n in submodules:
+                yield f"{target}.{n}", [], node.lineno
+            rest = [n for n in names if n not in submodules]
+            if rest:
+                private = [n for n in rest if n.startswith("_") and not n.startswith("__")]
+                yield target, private, node.lineno
+
+
+def modules():
+    return sorted(p for p in PACKAGE.rglob("*.py") if "node_modules" not in p.parts)
+
+
+def test_every_module_has_a_layer():
+    for path in modules():
+        layer_of(module_name(path))
+
+
+def test_no_lower_layer_imports_a_higher_one():
+    bad = []
+    for path in modules():
+        me = module_name(path)
+        mine = layer_of(me)
+        for target, _, line in imports(path):
+            if target == me:
+                continue
+            theirs = layer_of(target)
+            if theirs > mine:
+                bad.append(f"{path.relative_to(SRC)}:{line}: {me} ({LAYERS[mine][0]}) imports "
+                           f"{target} ({LAYERS[theirs][0]})")
+    assert not bad, "\n".join(bad)
+
+
+def test_no_module_imports_another_modules_private_names():
+    bad = []
+    for path in modules():
+        me = module_name(path)
+        for target, private, line in imports(path):
+            if private and target != me:
+                bad.append(f"{path.relative_to(SRC)}:{line}: imports {', '.join(private)} from {target}")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("source,expected", [
+    ("from kesbrdf.model import _fill_table\n", "imports _fill_table from kesbrdf.model"),
+    ("from kesbrdf.plotting import figures\n", "kesbrdf.plotting.figures"),
+])
+def test_the_checker_sees_violations(tmp_path, monkeypatch, source, expected):
+    """The checks can fail: a planted private import and a planted upward import."""
+    fake = PACKAGE / "kes.py"
+    monkeypatch.setattr(Path, "read_text", lambda self, encoding=None: source)
+    found = list(imports(fake))
+    target, private, _ = found[0]
+    if "imports" in expected:
+        assert private == ["_fill_table"] and target == "kesbrdf.model"
+    else:
+        assert target == expected and layer_of(target) > layer_of("kesbrdf.kes")
