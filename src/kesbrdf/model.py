@@ -49,7 +49,7 @@ from kesbrdf import kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.kinds import ReflectanceModel, register
-from kesbrdf.mappings import MAPPINGS, paper_phi_gamma, to_phi_gamma
+from kesbrdf.mappings import MAPPINGS, PAPER_MIN_SIN_BETA, to_phi_gamma
 from kesbrdf.measurement import Measurement
 
 __all__ = [
@@ -145,18 +145,25 @@ class Model(ReflectanceModel):
         cos_theta_r = wr[:, 2]
         inv_norm = 1.0 / np.sqrt(cos_theta_i * cos_theta_r)
         if mapping == "paper":
+            # eq. 3–4 as paper_phi_gamma, with sin β = 2h√(1 − h²) for β = 2 arcsin h
+            # and cos θ_r taken from the vector (same values, fewer transcendental calls)
             theta_i = np.arccos(np.minimum(cos_theta_i, 1.0))
             theta_r = np.arccos(np.minimum(cos_theta_r, 1.0))
             phi_i = np.arctan2(wi[:, 1], wi[:, 0])
             phi_r = np.arctan2(wr[:, 1], wr[:, 0])
-            phi, gamma, sin_beta = paper_phi_gamma(theta_i, phi_i, theta_r, phi_r)
-            phi = np.mod(np.where(gamma < 0, phi + np.pi, phi), 2 * np.pi)
+            gamma = theta_r - theta_i
+            s = np.sin(phi_r - phi_i)
+            h = np.minimum(0.5 * np.sqrt(s * s + cos_theta_r * cos_theta_r), 1.0)
+            sin_beta = np.maximum(2.0 * h * np.sqrt(1.0 - h * h), PAPER_MIN_SIN_BETA)
+            phi = np.pi / 2 - (phi_i + phi_r)
+            phi[gamma < 0] += np.pi
+            phi = np.mod(phi, 2 * np.pi)
             # ρ_KES is the measured quantity q on the paper's θ_i + θ_r = 90° line,
             # body included: c·√(cos θ_i cos θ_r) = c·√(cos γ / 2) there.
-            rho = self.lookup_unit(phi, np.abs(gamma)) + self.body * np.sqrt(
-                np.clip(np.cos(gamma), 0, None) / 2
-            )[:, None]
-            return rho * (inv_norm / sin_beta)[:, None]
+            rho = self.lookup_unit(phi, np.abs(gamma))
+            rho += self.body * np.sqrt(np.maximum(np.cos(gamma), 0.0) * 0.5)[:, None]
+            rho *= (inv_norm / sin_beta)[:, None]
+            return rho
         phi, gamma = to_phi_gamma(wi, wr, mapping)
         q = self.lookup_unit(phi, gamma)
         q *= inv_norm[:, None]
@@ -301,7 +308,8 @@ class Model(ReflectanceModel):
 
 def check_uniform_grid(grid: np.ndarray, step: float, name: str, source=None) -> None:
     """A one-line :class:`ModelError` unless ``grid`` is k·step, k = 0, 1, ... (within GRID_TOL)."""
-    expected = np.arange(grid.size) * step
+    with np.errstate(over="ignore", invalid="ignore"):
+        expected = np.arange(grid.size) * step
     if not (np.all(np.isfinite(grid)) and np.allclose(grid, expected, rtol=0, atol=GRID_TOL)):
         raise ModelError(
             f"{where(source)}{name}: expected the uniform grid k*{step:.6g} from 0 ({grid.size} values), "
