@@ -1,0 +1,77 @@
+"""The CLI on every model kind: `fit` says which kind and how many rows, consumers give
+one-line errors for kinds or mappings they do not support (issue 8)."""
+
+import json
+
+import pytest
+
+from kesbrdf.cli.main import main
+
+
+@pytest.fixture(scope="module")
+def dense(tmp_path_factory):
+    d = tmp_path_factory.mktemp("dense")
+    meas, model = d / "dense.csv", d / "dense.kes.json"
+    assert main(["simulate", "--protocol", "dense", "--step-deg", "10", "-o", str(meas)]) == 0
+    assert main(["fit", str(meas), "-o", str(model)]) == 0
+    return meas, model
+
+
+def test_fit_on_dense_data_chooses_halfdiff_and_says_so(dense, tmp_path, capsys):
+    meas, _ = dense
+    out = tmp_path / "m.kes.json"
+    assert main(["fit", str(meas), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    n = sum(1 for line in meas.read_text().splitlines() if line and not line.startswith("#")) - 1
+    assert f"kind kes-halfdiff: uses every row (several incidence angles per orientation); uses {n} of {n} rows" in err
+    assert json.loads(out.read_text())["kind"] == "kes-halfdiff"
+
+
+def test_fit_on_the_demo_measurement_succeeds_with_a_warning(tmp_path, capsys):
+    from kesbrdf import demo_data
+    from kesbrdf.acquisition.ingest import ingest
+    from kesbrdf.io.measurement_csv import write_measurement
+
+    meas = tmp_path / "measurement.csv"
+    write_measurement(meas, ingest(demo_data.embedded_manifest()).measurement)
+    capsys.readouterr()
+    assert main(["fit", str(meas), "-o", str(tmp_path / "m.kes.json")]) == 0
+    err = capsys.readouterr().err
+    warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
+    assert len(warnings) == 1 and "K(phi) = 1/rho <= 0" in warnings[0] and "gamma = " in warnings[0]
+    assert main(["fit", str(meas), "-o", str(tmp_path / "strict.kes.json"), "--strict"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("kesbrdf: error: K(phi) = 1/rho <= 0") and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "strict.kes.json").exists()
+
+
+def test_option_not_for_the_chosen_kind_is_an_error(dense, tmp_path, capsys):
+    meas, _ = dense
+    assert main(["fit", str(meas), "-o", str(tmp_path / "x.kes.json"), "--interpolation", "linear"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "interpolation (accepted by kes) do not apply to kind 'kes-halfdiff'" in err and "\n" not in err
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["plot", "{model}", "--figure", "5", "-o", "{tmp}/f5.png"],
+     "figure 5 supports models of kind 'kes'; got a 'kes-halfdiff' model"),
+    (["eval", "{model}", "--pairs", "{tmp}/none.csv", "--mapping", "paper", "-o", "{tmp}/o.csv"],
+     "a 'kes-halfdiff' model supports mapping 'halfdiff'; got 'paper'"),
+])
+def test_consumers_refuse_unsupported_kinds_in_one_line(dense, tmp_path, capsys, argv, message):
+    _, model = dense
+    argv = [a.format(model=model, tmp=tmp_path) for a in argv]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == f"kesbrdf: error: {message}"
+
+
+def test_eval_and_figure_6_work_on_halfdiff(dense, tmp_path):
+    _, model = dense
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg\n30,180,30,0\n90,0,10,0\n")
+    out = tmp_path / "o.csv"
+    assert main(["eval", str(model), "--pairs", str(pairs), "-o", str(out)]) == 0
+    rows = out.read_text().splitlines()
+    assert float(rows[1].split(",")[4]) > 0 and float(rows[2].split(",")[4]) == 0.0  # θ_i = 90°: 0
+    assert main(["plot", str(model), "--figure", "6", "-o", str(tmp_path / "f6.png")]) == 0

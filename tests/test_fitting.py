@@ -1,0 +1,124 @@
+"""kesbrdf.fit(measurement, kind="auto"): the kind that uses every row, and a report."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import kesbrdf
+from kesbrdf.errors import KesbrdfError, KESError, MeasurementError
+from kesbrdf.gonio import measure
+from kesbrdf.measurement import Measurement
+from kesbrdf.references.ward import AnisotropicWard
+from kesbrdf.validation import validate
+
+#: Every fitter reproduces its inputs at the measured geometries up to round-off.
+ROUND_TRIP_NRMSE = 1e-9
+#: The dense file of issue 8 fitted as kes: NRMSE 0.386 (56 of 900 rows used).
+KES_ON_DENSE_NRMSE_MIN = 0.05
+
+WARD = AnisotropicWard(0.12, 0.3, rho_d=0.1, rho_s=0.1)
+
+
+def test_paper_protocol_gives_kes_using_every_row():
+    m = measure(WARD)
+    model, report = kesbrdf.fit(m)
+    assert (model.kind, report.fitter) == ("kes", "kes")
+    assert report.rows_used == report.rows_total == len(m) == 116
+    assert report.rows_unused == ""
+    assert validate(model, m)["metrics"]["all"]["nrmse"] < ROUND_TRIP_NRMSE
+
+
+def test_dense_protocol_gives_halfdiff_using_every_row_and_beats_kes():
+    m = measure(WARD, protocol="dense")
+    model, report = kesbrdf.fit(m)
+    assert model.kind == "kes-halfdiff"
+    assert report.rows_used == len(m) == 900
+    assert "several incidence angles" in report.reason
+    assert validate(model, m)["metrics"]["all"]["nrmse"] < ROUND_TRIP_NRMSE
+    kes_model, kes_report = kesbrdf.fit(m, kind="kes")
+    # the rows the paper's kind cannot use are named, with their count and why
+    assert kes_report.rows_used == 56
+    assert kes_report.rows_unused.startswith("844 row(s): 844 off the incidence line")
+    assert validate(kes_model, m)["metrics"]["all"]["nrmse"] > KES_ON_DENSE_NRMSE_MIN
+
+
+def test_general_geometries_give_the_scattered_fit(rng):
+    n = 200
+    wi = rng.normal(size=(n, 3))
+    wr = rng.normal(size=(n, 3))
+    wi[:, 2] = np.abs(wi[:, 2]) + 0.2
+    wr[:, 2] = np.abs(wr[:, 2]) + 0.2
+    wi /= np.linalg.norm(wi, axis=1, keepdims=True)
+    wr /= np.linalg.norm(wr, axis=1, keepdims=True)
+    theta_i, phi_i = np.arccos(wi[:, 2]), np.arctan2(wi[:, 1], wi[:, 0])
+    theta_r, phi_r = np.arccos(wr[:, 2]), np.arctan2(wr[:, 1], wr[:, 0])
+    m = Measurement(theta_i=theta_i, phi_i=phi_i, theta_r=theta_r, phi_r=phi_r,
+                    values=WARD(wi, wr)[:, :1], channels=("value",))
+    model, report = kesbrdf.fit(m, max_nfev=20, offset_step_deg=22.5)
+    assert (model.kind, report.fitter) == ("kes", "scattered")
+    assert report.rows_used == n and report.candidates["kes"] == 0
+    assert "warp_offset_deg" in model.parameters
+
+
+def test_option_that_does_not_apply_is_an_error():
+    m = measure(WARD, protocol="dense", step_deg=10)
+    with pytest.raises(KesbrdfError, match=r"interpolation \(accepted by kes\) do not apply to kind 'kes-halfdiff'"):
+        kesbrdf.fit(m, interpolation="linear")
+    with pytest.raises(KesbrdfError, match="banana_option \\(not an option of any kind\\)"):
+        kesbrdf.fit(m, kind="kes", banana_option=1)
+    with pytest.raises(KesbrdfError, match="expected kind one of auto, kes, kes-halfdiff, scattered, got 'banana'"):
+        kesbrdf.fit(m, kind="banana")
+
+
+def test_log_fallback_is_the_default_with_a_warning_and_strict_restores_the_error():
+    m = measure(AnisotropicWard(0.08, 0.3, rho_d=0.0, rho_s=0.3))  # K(φ) ≤ 0 between orientations
+    model, report = kesbrdf.fit(m, body="none")
+    (warning,) = report.warnings
+    assert warning == model.warnings[0] and "gamma = " in warning
+    assert model.parameters["fallback"] == "log"
+    with pytest.raises(KESError, match="K\\(phi\\) = 1/rho <= 0"):
+        kesbrdf.fit(m, body="none", strict=True)
+
+
+def test_no_kind_fits_names_why():
+    m = measure(WARD, orientations_deg=(0.0,))
+    with pytest.raises(MeasurementError, match="no model kind can use this measurement: kes: .*missing 45, 90"):
+        kesbrdf.fit(m)
+
+
+def test_report_is_recorded_in_the_model_file(tmp_path):
+    model, report = kesbrdf.fit(measure(WARD))
+    doc = json.loads(model.save(tmp_path / "m.kes.json").read_text())
+    assert doc["diagnostics"]["fit_report"]["kind"] == "kes"
+    assert doc["diagnostics"]["fit_report"]["rows_used"] == report.rows_used
+
+
+def test_a_new_fitter_joins_auto_selection(monkeypatch):
+    """A future kind (e.g. the woven-cloth prior) joins with one FIT_MODULES line and a
+    place in AUTO_CANDIDATES; it wins when it uses more rows."""
+    from kesbrdf import kinds
+
+    @kinds.register_fitter("everything")
+    class Everything:
+        kind = "kes"
+        fit_options = ()
+
+        @classmethod
+        def usable_rows(cls, m):
+            return np.ones(len(m), bool), ""
+
+        @classmethod
+        def fit_measurement(cls, m, **options):
+            return kesbrdf.fit(m, kind="kes")[0]
+
+    monkeypatch.setitem(kinds.FIT_MODULES, "everything", __name__)
+    monkeypatch.setattr(kinds, "AUTO_CANDIDATES", ["kes", "everything"])
+    from kesbrdf import fitting
+
+    monkeypatch.setattr(fitting, "AUTO_CANDIDATES", ["kes", "everything"])
+    m = measure(WARD, protocol="dense", step_deg=10)
+    _, report = kesbrdf.fit(m)
+    assert report.fitter == "everything" and report.rows_used == len(m)
