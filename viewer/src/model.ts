@@ -69,10 +69,20 @@ export function decodeArray(a: ArrayJson, what: string): { data: Float64Array<Ar
   return { data, shape: a.shape };
 }
 
-/** Parse a model file document (docs/formats.md) into a KesModel. */
+/** Model kinds (the file's `kind`, docs/models.md) this viewer can show: the `kes` table. */
+export const VIEWABLE_KINDS = ['kes'];
+
+/** Parse a model file document (docs/formats.md) into a KesModel; other kinds are refused. */
 export function parseModel(doc: any, name: string): KesModel {
   if (!doc || doc.format !== 'kesbrdf-model') throw new Error(`${name}: expected a kesbrdf model file`);
   if (doc.format_version !== 1) throw new Error(`${name}: expected format_version 1, got ${doc.format_version}`);
+  const kind = doc.kind ?? 'kes';
+  if (!VIEWABLE_KINDS.includes(kind)) {
+    throw new Error(
+      `${name}: the viewer shows models of kind ${VIEWABLE_KINDS.map((k) => `'${k}'`).join(', ')}; ` +
+        `this is a '${String(kind).slice(0, 40)}' model (use kesbrdf plot --figure 6 or kesbrdf eval for it)`,
+    );
+  }
   const arrays = doc.arrays ?? {};
   const phi = decodeArray(arrays.phi_grid, 'phi_grid');
   const gamma = decodeArray(arrays.gamma_grid, 'gamma_grid');

@@ -221,6 +221,19 @@ async function main() {
       return report;
     }
 
+    await test('a model kind the viewer cannot show is refused with a clear message', async () => {
+      const message = await page.evaluate(([doc]) => {
+        try {
+          window.kesbrdf.loadModelDoc({ ...doc, kind: 'kes-halfdiff' }, 'hd.kes.json');
+          return null;
+        } catch (e) {
+          return e.message;
+        }
+      }, [asymDoc]);
+      assert(message !== null && message.startsWith("hd.kes.json: the viewer shows models of kind 'kes'; this is a 'kes-halfdiff' model"),
+        `unexpected message ${message}`);
+    });
+
     await test(`GLSL shading agrees with Python (${ref.source}) within ${GLSL_REL_TOL} relative`, async () => {
       const report = { ward: await agreement(ref, 'fitted Ward model') };
       // an asymmetric lobe: a mirrored or transposed table lookup would fail here
