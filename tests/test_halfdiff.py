@@ -283,3 +283,19 @@ def test_scattered_incidence_angles_are_resampled(ward_rgb, rng):
     # samples are off the 2° grid: linear interpolation error, largest on the peak
     # (observed median 0.6 %, max ≈ 40 % on the sharpest samples)
     assert np.median(rel) < 0.02
+
+
+def test_edges_horizon_unnormalised_and_unsupported_mappings(dense_model, random_pairs):
+    """The kinds contract's front end holds for this kind too (kesbrdf.mappings)."""
+    from kesbrdf.brdf import evaluate
+    from kesbrdf.geometry import spherical_to_cartesian
+
+    wi, wr = random_pairs
+    ref = evaluate(dense_model, wi, wr)
+    np.testing.assert_allclose(evaluate(dense_model, 1e-200 * wi, 1e200 * wr), ref, rtol=1e-12)
+    grazing = spherical_to_cartesian(np.radians(90.0), 1.0)
+    assert np.all(evaluate(dense_model, grazing, wr) == 0.0)
+    assert np.all(evaluate(dense_model, [1.0, 0.0, 1e-300], wr) == 0.0)
+    for mapping in ("paper", "deviation", "halfvector"):
+        with pytest.raises(ModelError, match=f"supports mapping 'halfdiff'; got '{mapping}'"):
+            evaluate(dense_model, wi, wr, mapping)

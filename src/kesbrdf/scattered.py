@@ -95,7 +95,7 @@ from kesbrdf.errors import KesbrdfError, MeasurementError
 from kesbrdf.kinds import register_fitter
 from kesbrdf.mappings import to_phi_gamma
 from kesbrdf.measurement import Measurement
-from kesbrdf.model import Model, fill_table, line_weight
+from kesbrdf.model import Model, fallback_warning, fill_table, line_weight
 
 __all__ = [
     "fit_scattered",
@@ -596,6 +596,7 @@ def fit_scattered(
     if not (np.all(np.isfinite(table)) and np.all(table >= 0) and np.all(np.isfinite(body_arr))):
         raise KesbrdfError("fit_scattered produced a non-finite or negative table; this is a bug")
     warp_out = math.degrees(delta) if symmetry != "isotropic" else 0.0
+    fallback_deg = [round(float(np.degrees(gamma_grid[i])), 6) for i in sorted(fallback_gamma)]
     return Model(
         channels=tuple(m.channels),
         phi_grid=np.arange(N_PHI) * (2 * np.pi / N_PHI),
@@ -630,8 +631,9 @@ def fit_scattered(
             "mapping": mapping,
         },
         diagnostics={
+            "warnings": [fallback_warning("gamma", fallback_deg)] if fallback_deg else [],
             "floored": [],
-            "fallback_gamma_deg": [round(float(np.degrees(gamma_grid[i])), 6) for i in sorted(fallback_gamma)],
+            "fallback_gamma_deg": fallback_deg,
             "lobe_clamped": clamped,
             "n_used": n_used,
             "azimuth_gap_deg": round(math.degrees(gap), 3),
