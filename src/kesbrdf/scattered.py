@@ -594,7 +594,7 @@ def fit_scattered(
     table = np.stack(tables, axis=-1)
     body_arr = np.asarray(bodies, float)
     if not (np.all(np.isfinite(table)) and np.all(table >= 0) and np.all(np.isfinite(body_arr))):
-        raise KesbrdfError("fit_scattered produced a non-finite or negative table; this is a bug")
+        raise RuntimeError("fit_scattered produced a non-finite or negative table; this is a bug")
     warp_out = math.degrees(delta) if symmetry != "isotropic" else 0.0
     fallback_deg = [round(float(np.degrees(gamma_grid[i])), 6) for i in sorted(fallback_gamma)]
     return Model(
