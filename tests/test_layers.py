@@ -77,11 +77,12 @@ def resolve(module: str, node: ast.ImportFrom) -> str:
     return node.module or ""
 
 
-def imports(path: Path):
+def imports(path: Path, top_level_only: bool = False):
     """(imported module, private names taken from it, line) of one source file."""
     module = module_name(path)
     tree = ast.parse(path.read_text(encoding="utf-8"))
-    for node in ast.walk(tree):
+    nodes = tree.body if top_level_only else ast.walk(tree)
+    for node in nodes:
         if isinstance(node, ast.Import):
             for alias in node.names:
                 if alias.name.split(".")[0] == "kesbrdf":
@@ -132,6 +133,32 @@ def test_no_module_imports_another_modules_private_names():
             if private and target != me:
                 bad.append(f"{path.relative_to(SRC)}:{line}: imports {', '.join(private)} from {target}")
     assert not bad, "\n".join(bad)
+
+
+def test_module_level_imports_have_no_cycle():
+    """No import loop (issue 8: brdf <-> halfdiff <-> io/model_file <-> model): the graph
+    of module-level imports is acyclic.  (A lazy import inside a function, such as
+    ``ReflectanceModel.save`` importing the model-file writer, is not a loop at import
+    time; the layer test above still constrains it.)"""
+    graph = {}
+    for path in modules():
+        me = module_name(path)
+        graph[me] = {t for t, _, _ in imports(path, top_level_only=True) if t != me}
+    state = {}
+
+    def visit(node, stack):
+        state[node] = "open"
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == "open":
+                cycle = stack[stack.index(nxt):] + [nxt] if nxt in stack else [node, nxt]
+                raise AssertionError("import cycle: " + " -> ".join(cycle))
+            if nxt not in state:
+                visit(nxt, stack + [nxt])
+        state[node] = "done"
+
+    for node in sorted(graph):
+        if node not in state:
+            visit(node, [node])
 
 
 @pytest.mark.parametrize("source,expected", [
