@@ -133,7 +133,7 @@ async function uploadCSV(file: File): Promise<void> {
   document.body.dataset.status = 'busy';
   try {
     const body = await file.arrayBuffer();
-    const fallback = $<HTMLInputElement>('fallback-log').checked ? '&fallback=log' : '';
+    const fallback = $<HTMLInputElement>('strict-fit').checked ? '&fallback=error' : ''; // --strict
     const doc = await api(`api/fit?name=${encodeURIComponent(file.name)}${fallback}`, {
       method: 'POST',
       headers: { 'Content-Type': 'text/csv' },

@@ -10,7 +10,9 @@ default and serves
   "measurement": <see :func:`measurement_to_json`> or null}``;
 * ``POST /api/fit?name=<file name>[&fallback=error|log]`` with the raw CSV bytes as body:
   reads it with :func:`kesbrdf.io.measurement_csv.read_measurement`, fits it with
-  :func:`kesbrdf.fit` (kind chosen from the data, as ``kesbrdf fit``), keeps the result in memory and answers like ``/api/model``.
+  :func:`kesbrdf.fit` with its defaults (kind chosen from the data, as ``kesbrdf fit``;
+  ``fallback=error`` is ``--strict``, ``log`` the default), keeps the result in memory
+  and answers like ``/api/model``.
 
 Errors come back as ``{"error": "<one line>"}`` with a 4xx status (the same message
 the CLI prints for the same input); the server keeps running.  Request bodies larger
