@@ -36,6 +36,10 @@ EXAMPLES = {"bytes": 900, "json": 1000, "shape": 300}
 
 
 def examples(kind: str) -> int:
+    """Examples per property: a few thousand, 100,000 under the fuzz profile, or
+    ``KESBRDF_FUZZ_EXAMPLES`` when set (for a sweep of a given size)."""
+    if os.environ.get("KESBRDF_FUZZ_EXAMPLES"):
+        return int(os.environ["KESBRDF_FUZZ_EXAMPLES"])
     return 100_000 if FUZZ else EXAMPLES[kind]
 
 
