@@ -20,7 +20,7 @@ import json
 
 import numpy as np
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
 from kesbrdf.measurement import Measurement
 
@@ -31,8 +31,7 @@ PROTOCOLS = ("paper", "dense")
 
 def protocol_geometry(protocol: str = "paper", step_deg: float | None = None, orientations_deg=(0, 45, 90, 135)):
     """(ψ, θ_i, θ_r) arrays in radians for a protocol (module docstring)."""
-    if protocol not in PROTOCOLS:
-        raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
+    validate_choice("protocol", protocol, PROTOCOLS)
     if step_deg is None:
         step_deg = 3.0 if protocol == "paper" else 6.0
     if not (0 < step_deg < 45) or abs(90.0 / step_deg - round(90.0 / step_deg)) > 1e-9:

@@ -44,7 +44,7 @@ from pathlib import Path
 
 from kesbrdf._atomic import write_text
 from kesbrdf.acquisition.sensor import RESPONSES
-from kesbrdf.errors import FormatError, where
+from kesbrdf.errors import FormatError, where, validate_choice
 
 __all__ = [
     "Manifest",
@@ -183,10 +183,7 @@ def _parse_header(key: str, value: str, path, line: int):
             raise FormatError(f"{where(path, line)}white_reflectance: expected a reflectance factor in (0, 1], got {value!r}")
         return r
     if key == "response":
-        value = value.strip().lower()
-        if value not in RESPONSES:
-            raise FormatError(f"{where(path, line)}response: expected one of {', '.join(RESPONSES)}, got {value!r}")
-        return value
+        return validate_choice("response", value.strip().lower(), RESPONSES, path, line, FormatError)
     if key == "saturation_level":
         level = _parse_float(value, "saturation_level", path, line)
         if not level > 0:
@@ -254,9 +251,7 @@ def _parse_row(record: dict, path, base: Path, line: int) -> ManifestRow:
     file = record["file"].strip()
     if not file:
         raise FormatError(f"{where(path, line)}column file: expected a file name, got an empty field")
-    kind = record["kind"].strip().lower()
-    if kind not in KINDS:
-        raise FormatError(f"{where(path, line)}column kind: expected one of {', '.join(KINDS)}, got {record['kind']!r}")
+    kind = validate_choice("column kind", record["kind"].strip().lower(), KINDS, path, line, FormatError)
     angles = {c: _parse_float(record.get(c, ""), c, path, line) for c in ANGLE_COLUMNS}
     exposure = _parse_float(record["exposure_s"], "exposure_s", path, line)
     if not exposure > 0:

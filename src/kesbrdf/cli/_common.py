@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import sys
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import validate_choice
 
 REFERENCES = ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
 
@@ -40,7 +40,8 @@ def make_reference(name: str, params: str | None = None):
         if name == "sadeghi-black-satin":
             return sadeghi2013.black_satin(**extra)
         return sadeghi2013.Sadeghi2013(preset="satin", **extra)
-    raise KesbrdfError(f"unknown reference {name!r}; expected one of {', '.join(REFERENCES)}")
+    validate_choice("reference", name, REFERENCES)
+    raise RuntimeError(f"reference {name!r} is listed in REFERENCES but has no constructor")
 
 
 def stderr(text: str) -> None:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf._atomic import write_text
-from kesbrdf.errors import FormatError, MeasurementError, where
+from kesbrdf.errors import FormatError, MeasurementError, where, validate_choice
 from kesbrdf.measurement import Measurement
 
 __all__ = ["read_measurement", "write_measurement", "QUANTITIES", "FORMAT_VERSION"]
@@ -98,11 +98,8 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
         raise FormatError(
             f"{where(source)}expected measurement format version {FORMAT_VERSION}, got {version!r}"
         )
-    quantity = metadata.get("quantity", "brdf").lower()
-    if quantity not in QUANTITIES:
-        raise FormatError(
-            f"{where(source)}unknown quantity {quantity!r}; expected one of {', '.join(QUANTITIES)}"
-        )
+    quantity = validate_choice("quantity", metadata.get("quantity", "brdf").lower(), QUANTITIES, source,
+                               error=FormatError)
 
     columns = _classify_columns(header, source, header_line)
     geometry, channels, unc_cols, text_cols = columns
@@ -139,10 +136,7 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
     _check_angles(numeric, geometry, linenos, source)
     if "flag" in text_values:
         for k, flag in enumerate(text_values["flag"]):
-            if flag not in FLAGS:
-                raise FormatError(
-                    f"{where(source, int(linenos[k]))}column flag: expected one of {', '.join(FLAGS)}, got {flag!r}"
-                )
+            validate_choice("column flag", flag, FLAGS, source, int(linenos[k]), FormatError)
 
     values = np.stack([numeric[c] for c in channels], axis=-1)
     uncertainty = None

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf._atomic import write_text
-from kesbrdf.errors import KesbrdfError, where
+from kesbrdf.errors import KesbrdfError, where, validate_choice
 from kesbrdf.render import scenes as _scenes
 
 __all__ = ["render_animation", "encode_video", "VIDEO_FORMATS"]
@@ -99,8 +99,7 @@ def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions
         raise FileNotFoundError(2, "No such file or directory", str(model_path))
     drape = _scenes.read_drape(drape_dir)
     scene = scene or ("dressform" if drape.scene == "dressform" else "drape")
-    if scene not in ("drape", "dressform"):
-        raise KesbrdfError(f"animation: expected scene 'drape' or 'dressform', got {scene!r}")
+    validate_choice("animation scene", scene, ("drape", "dressform"))
     fps = float(fps or drape.fps)
     frames_dir = Path(frames_dir) if frames_dir else output.with_name(output.stem + "_frames")
     frames_dir.mkdir(parents=True, exist_ok=True)

@@ -35,7 +35,7 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-from kesbrdf.errors import FormatError, KesbrdfError, where
+from kesbrdf.errors import FormatError, KesbrdfError, where, validate_choice
 from kesbrdf.render import mesh as _mesh
 
 __all__ = [
@@ -83,10 +83,8 @@ class RenderOptions:
     integrator: dict | None = field(default=None, repr=False)
 
     def validate(self) -> "RenderOptions":
-        if self.env not in ENVIRONMENTS:
-            raise KesbrdfError(f"unknown environment {self.env!r}; expected one of {', '.join(ENVIRONMENTS)}")
-        if self.light not in LIGHTS:
-            raise KesbrdfError(f"unknown light {self.light!r}; expected one of {', '.join(LIGHTS)}")
+        validate_choice("environment", self.env, ENVIRONMENTS)
+        validate_choice("light", self.light, LIGHTS)
         w, h = self.resolution
         if not (int(w) > 0 and int(h) > 0 and int(self.spp) > 0):
             raise KesbrdfError(f"expected positive resolution and spp, got {w}x{h} and {self.spp}")
@@ -132,8 +130,7 @@ def read_drape(path) -> Drape:
         name = c.get("file") if isinstance(c, dict) else c
         colliders.append(root / str(name))
     up = str(meta.get("up_axis") or _guess_up_axis(frames[0], frames[-1])).lower()
-    if up not in ("y", "z"):
-        raise FormatError(f"{where(meta_path)}expected up_axis 'y' or 'z', got {up!r}")
+    validate_choice("up_axis", up, ("y", "z"), meta_path, error=FormatError)
     return Drape(root, float(meta.get("fps", 24.0)), frames, colliders, str(meta.get("scene", "sphere")), up)
 
 
@@ -303,8 +300,7 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
     framing : (center, radius), optional
         Fix the camera (animations keep one framing for every frame).
     """
-    if scene not in SCENES:
-        raise KesbrdfError(f"unknown scene {scene!r}; expected one of {', '.join(SCENES)}")
+    validate_choice("scene", scene, SCENES)
     opts.validate()
     if cloth_bsdf is None:
         from kesbrdf.render.bsdf import check_model

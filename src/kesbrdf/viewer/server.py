@@ -34,7 +34,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 from kesbrdf._version import __version__
-from kesbrdf.errors import KesbrdfError, ModelError, where
+from kesbrdf.errors import KesbrdfError, ModelError, where, validate_choice
 
 __all__ = [
     "DEFAULT_MAX_UPLOAD_BYTES",
@@ -390,8 +390,10 @@ class _Handler(BaseHTTPRequestHandler):
         data = self.rfile.read(length)
         name = _safe_upload_name((query.get("name") or ["upload.csv"])[0])
         fallback = (query.get("fallback") or [None])[0]
-        if fallback not in (None, "error", "log"):
-            return self._error(400, f"expected fallback 'error' or 'log', got {fallback!r}")
+        try:
+            validate_choice("fallback", fallback, (None, "error", "log"))
+        except KesbrdfError as exc:
+            return self._error(400, str(exc))
         try:
             model, measurement = fit_csv_bytes(data, name, fallback)
         except KesbrdfError as exc:
