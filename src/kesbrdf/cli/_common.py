@@ -2,17 +2,31 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
-from kesbrdf.errors import validate_choice
+from kesbrdf.errors import KesbrdfError, validate_choice
 
 REFERENCES = ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
 
 
 def make_reference(name: str, params: str | None = None):
-    """Build a reference BRDF by name (one registry; the error lists the names)."""
-    extra = json.loads(params) if params else {}
+    """Build a reference BRDF by name (one registry; the error lists the names).
+
+    ``params`` is ``--params``'s JSON text, checked by :func:`kesbrdf.cli._params.parse_params`.
+    """
+    from kesbrdf.cli._params import parse_params
+
+    validate_choice("reference", name, REFERENCES)
+    extra = parse_params(name, params)
+    try:
+        return _build_reference(name, extra)
+    except KesbrdfError:
+        raise
+    except (TypeError, ValueError) as exc:  # a combination the per-parameter checks cannot see
+        raise KesbrdfError(f"--params for reference {name}: {' '.join(str(exc).split())}") from None
+
+
+def _build_reference(name: str, extra: dict):
     if name == "ward":
         from kesbrdf.references.ward import AnisotropicWard
 
@@ -40,7 +54,6 @@ def make_reference(name: str, params: str | None = None):
         if name == "sadeghi-black-satin":
             return sadeghi2013.black_satin(**extra)
         return sadeghi2013.Sadeghi2013(preset="satin", **extra)
-    validate_choice("reference", name, REFERENCES)
     raise RuntimeError(f"reference {name!r} is listed in REFERENCES but has no constructor")
 
 
@@ -64,3 +77,85 @@ def print_metrics(result: dict, title: str = "") -> None:
     for ch, m in rows.items():
         table.add_row(ch, str(m["n"]), f"{m['rmse']:.4g}", f"{m['nrmse']:.4g}", f"{m['log_rmse']:.4g}", f"{m['max_abs']:.4g}")
     Console().print(table)
+
+
+def check_output(path, suffixes: tuple[str, ...], flag: str = "-o"):
+    """Check an output path before any long work starts; return it as a :class:`~pathlib.Path`.
+
+    The suffix must be one of ``suffixes`` (case-insensitive; ``()`` accepts any), the
+    path must not be an existing folder, and its nearest existing parent must be a
+    writable folder (missing folders are created when the output is written).
+
+    Raises
+    ------
+    KesbrdfError
+        One line naming ``flag`` and the path.
+    """
+    import os
+    from pathlib import Path
+
+    out = Path(path)
+    if suffixes and not out.name.lower().endswith(tuple(s.lower() for s in suffixes)):
+        raise KesbrdfError(
+            f"{flag} {out}: expected a file ending in {', '.join(suffixes)}, got {out.suffix or 'no suffix'!r}"
+        )
+    if out.is_dir():
+        raise KesbrdfError(f"{flag} {out}: expected a file name, got an existing folder")
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise KesbrdfError(f"{flag} {out}: expected a folder to write into, but {parent} is a file")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise KesbrdfError(f"{flag} {out}: folder {parent} is not writable")
+    return out
+
+
+def non_negative_int(text: str) -> int:
+    """argparse type: an integer >= 0 (seeds)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return value
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1 (counts, sizes)."""
+    import argparse
+
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 1, got {text!r}")
+    return value
+
+
+def finite_float(text: str) -> float:
+    """argparse type: a finite number (no nan, inf)."""
+    import argparse
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """argparse type: a finite number >= 0."""
+    import argparse
+
+    value = finite_float(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"expected a number >= 0, got {text!r}")
+    return value

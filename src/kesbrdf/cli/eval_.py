@@ -7,7 +7,7 @@ import io
 
 import numpy as np
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 from kesbrdf.io.pairs_csv import PAIR_COLUMNS, read_pairs  # noqa: F401  (read_pairs: kept importable here)
 
 HELP = "Evaluate a model's BRDF at direction pairs (theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg)."
@@ -26,6 +26,7 @@ def run(args) -> int:
     from kesbrdf.geometry import spherical_to_cartesian
     from kesbrdf.model import load
 
+    check_output(args.output, (".csv",))
     model = load(args.model)
     pairs = read_pairs(args.pairs)
     rad = np.radians(pairs)
