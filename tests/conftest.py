@@ -43,6 +43,9 @@ else:
     settings.register_profile("default", deadline=None, derandomize=True, suppress_health_check=_quiet)
     settings.register_profile(
         "fuzz",
-        max_examples=int(os.environ.get("KESBRDF_FUZZ_EXAMPLES", "100000")), deadline=None, suppress_health_check=_quiet, database=None
+        max_examples=int(os.environ.get("KESBRDF_FUZZ_EXAMPLES", "100000")),
+        deadline=None,
+        suppress_health_check=_quiet,
+        database=None,
     )
     settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))
