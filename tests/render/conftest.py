@@ -1,7 +1,9 @@
 """Fixtures for the renderer tests: small model files fitted from reference BRDFs.
 
-Every test here needs Mitsuba 3 with an LLVM ≥ 17 backend (DESIGN §7); the whole folder
-is skipped when ``mitsuba`` is not installed.
+Every test here needs Mitsuba 3 with an LLVM ≥ 17 backend (DESIGN §7).  When ``mitsuba``
+or ``drjit`` is not installed, each test module of this folder is reported as SKIPPED
+(one entry per module, with the reason), not silently left out: the modules are not
+imported, since they need the renderer at import time.
 """
 
 import importlib.util
@@ -9,9 +11,37 @@ import importlib.util
 import numpy as np
 import pytest
 
-if importlib.util.find_spec("mitsuba") is None or importlib.util.find_spec("drjit") is None:
-    # kesbrdf[render] not installed: nothing here can run
-    collect_ignore_glob = ["test_*.py"]
+
+def _installed(name: str) -> bool:
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):  # e.g. sys.modules[name] = None
+        return False
+
+
+MISSING = [name for name in ("mitsuba", "drjit") if not _installed(name)]
+SKIP_REASON = f"render tests need {' and '.join(MISSING)} (install kesbrdf[render])"
+
+
+class _SkippedModule(pytest.File):
+    """Stands in for a test module that cannot be imported: one item, skipped with the reason."""
+
+    def collect(self):
+        yield _SkippedItem.from_parent(self, name=self.path.stem)
+
+
+class _SkippedItem(pytest.Item):
+    def runtest(self):
+        pytest.skip(SKIP_REASON)
+
+    def reportinfo(self):
+        return self.path, None, f"{self.path.name} (skipped: {SKIP_REASON})"
+
+
+def pytest_pycollect_makemodule(module_path, parent):
+    if MISSING:
+        return _SkippedModule.from_parent(parent, path=module_path)
+    return None
 
 
 def _fit_and_save(path, ref, **fit_kwargs):
