@@ -35,7 +35,8 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-from kesbrdf.errors import FormatError, KesbrdfError, where, validate_choice
+from kesbrdf.errors import FormatError, KesbrdfError, validate_choice, where
+from kesbrdf.io.ply import write_ply
 from kesbrdf.render import mesh as _mesh
 
 __all__ = [
@@ -253,7 +254,8 @@ def _ply_shape(path, bsdf: dict, up_axis: str = "y") -> "mi.Shape":
 
 def _mesh_shape(workdir: Path, name: str, mesh, bsdf: dict) -> "mi.Shape":
     path = workdir / f"{name}.ply"
-    _mesh.write_ply(path, *mesh)
+    positions, normals, uvs, faces = mesh
+    write_ply(path, positions, faces, normals, uvs)
     return _ply_shape(path, bsdf)
 
 
