@@ -23,7 +23,7 @@ import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
-from kesbrdf.measurement import Measurement
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG, Measurement
 
 __all__ = ["PROTOCOLS", "protocol_geometry", "measure"]
 
@@ -38,7 +38,7 @@ MIN_STEP_DEG = 0.5
 MAX_ORIENTATIONS = 360
 
 
-def protocol_geometry(protocol: str = "paper", step_deg: float | None = None, orientations_deg=(0, 45, 90, 135)):
+def protocol_geometry(protocol: str = "paper", step_deg: float | None = None, orientations_deg=PAPER_ORIENTATIONS_DEG):
     """(ψ, θ_i, θ_r) arrays in radians for a protocol (module docstring)."""
     validate_choice("protocol", protocol, PROTOCOLS)
     if step_deg is None:
@@ -78,7 +78,7 @@ def measure(
     noise: float = 0.0,
     noise_floor: float = 0.0,
     rng=None,
-    orientations_deg=(0, 45, 90, 135),
+    orientations_deg=PAPER_ORIENTATIONS_DEG,
     sample: str | None = None,
 ) -> Measurement:
     """Measure ``brdf`` (callable f(wi, wr) -> (..., C)) in a protocol.

@@ -49,6 +49,7 @@ from kesbrdf.acquisition.manifest import write_manifest
 from kesbrdf.acquisition.sensor import Sensor
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
 
 __all__ = ["simulate_images", "EXPOSURE_LADDER_S", "WHITE_LAYOUTS", "FILE_FORMATS"]
 
@@ -78,7 +79,7 @@ def simulate_images(
     protocol: str = "paper",
     step_deg: float | None = None,
     *,
-    orientations_deg=(0, 45, 90, 135),
+    orientations_deg=PAPER_ORIENTATIONS_DEG,
     size: int = 32,
     margin: int = 4,
     roi_inset: int = 2,

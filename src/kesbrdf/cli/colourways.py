@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import check_output, positive_int, stderr
+from kesbrdf.cli._common import check_output, stderr
 from kesbrdf.cli.render import add_render_options, render_options
 
 HELP = "Render a contact sheet of one garment in >= 6 colourways (same gloss and anisotropy, new body colour)."
@@ -16,12 +16,16 @@ def add_arguments(p):
     p.add_argument("--drape", metavar="DRAPE_DIR", default=None, help="render this drape folder's last frame")
     p.add_argument("--colours", default=None, metavar="NAME=R,G,B;...",
                    help="body albedos in [0,1], at least 6 (default: ivory, crimson, emerald, navy, gold, plum, teal, black)")
-    p.add_argument("--columns", type=positive_int, default=4, help="tiles per row (default 4)")
+    p.add_argument("--columns", type=int, default=4, help="tiles per row (default 4)")
     add_render_options(p, spp=32, resolution="200x240")
 
 
 def run(args) -> int:
     check_output(args.output, (".png",))
+    if args.columns < 1:
+        from kesbrdf.errors import KesbrdfError
+
+        raise KesbrdfError(f"--columns: expected tiles per row >= 1, got {args.columns}")
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from kesbrdf.render import colourways

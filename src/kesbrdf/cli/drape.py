@@ -9,8 +9,6 @@ from __future__ import annotations
 
 import time
 
-from kesbrdf.cli._common import finite_float, non_negative_int, positive_int
-
 HELP = "Simulate a satin drape (sheet onto a sphere, skirt on a dress form) and write a PLY sequence."
 
 
@@ -18,11 +16,11 @@ def add_arguments(p):
     p.add_argument("--scene", choices=("sphere", "dressform"), default="sphere",
                    help="sphere: a 1 m sheet falls onto a sphere; dressform: an A-line skirt on a dress form")
     p.add_argument("-o", "--output", required=True, help="output folder (frames, colliders, drape.json)")
-    p.add_argument("--frames", type=positive_int, default=120, help="frames to write, frame 0 is t = 0 (default 120)")
-    p.add_argument("--fps", type=finite_float, default=30.0, help="frames per second (default 30)")
-    p.add_argument("--resolution", type=positive_int, default=48, help="cloth cells along the warp (default 48)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="seed of the initial perturbation (default 0)")
-    p.add_argument("--density-gsm", type=finite_float, default=120.0, help="fabric areal density in g/m² (default 120)")
+    p.add_argument("--frames", type=int, default=120, help="frames to write, frame 0 is t = 0 (default 120)")
+    p.add_argument("--fps", type=float, default=30.0, help="frames per second (default 30)")
+    p.add_argument("--resolution", type=int, default=48, help="cloth cells along the warp (default 48)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the initial perturbation (default 0)")
+    p.add_argument("--density-gsm", type=float, default=120.0, help="fabric areal density in g/m² (default 120)")
     p.add_argument("--overwrite", action="store_true",
                    help="replace a drape with different parameters in the output folder")
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import check_output, finite_float, non_negative_int, positive_int, stderr
+import math
+
+from kesbrdf.cli._common import check_output, stderr
 from kesbrdf.errors import KesbrdfError
 
 HELP = "Render a model (sphere, swatch, draped cloth or dress form) with Mitsuba 3; --animation renders a drape sequence."
@@ -37,7 +39,7 @@ def parse_rgb_flag(text: str | None, flag: str):
 
 def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
     """Flags shared by ``render`` and ``colourways``."""
-    p.add_argument("--spp", type=positive_int, default=spp, help=f"samples per pixel (default {spp})")
+    p.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
     p.add_argument("--resolution", default=resolution, help=f"image size WxH (default {resolution})")
     p.add_argument("--light", choices=("area", "sun", "none"), default="area", help="key light (default area)")
     p.add_argument("--env", choices=("studio", "sky", "uniform", "none"), default="studio",
@@ -46,9 +48,9 @@ def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
     p.add_argument("--mapping", choices=("deviation", "halfvector"), default="deviation",
                    help="(phi, gamma) mapping (docs/formats.md); 'paper' is not renderable")
     p.add_argument("--one-sided", action="store_true", help="shade back faces black (default: two-sided cloth)")
-    p.add_argument("--exposure", type=finite_float, default=0.0, help="exposure in stops for PNG/JPEG output")
-    p.add_argument("--max-depth", type=positive_int, default=4, help="path length (default 4)")
-    p.add_argument("--seed", type=non_negative_int, default=0, help="sampler seed")
+    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for PNG/JPEG output")
+    p.add_argument("--max-depth", type=int, default=4, help="path length (default 4)")
+    p.add_argument("--seed", type=int, default=0, help="sampler seed")
 
 
 def render_options(args, **extra):
@@ -77,11 +79,11 @@ def add_arguments(p):
                    help="render every frame of a 'kesbrdf drape' folder to a video (resumable)")
     p.add_argument("--drape", metavar="DRAPE_DIR", default=None,
                    help="for --scene drape/dressform: render this drape folder's frame (default: a procedural garment)")
-    p.add_argument("--frame", type=non_negative_int, default=None, help="frame of --drape to render (default: the last)")
-    p.add_argument("--fps", type=finite_float, default=None, help="animation frame rate (default: drape.json's)")
+    p.add_argument("--frame", type=int, default=None, help="frame of --drape to render (default: the last)")
+    p.add_argument("--fps", type=float, default=None, help="animation frame rate (default: drape.json's)")
     p.add_argument("--base-color", default=None, metavar="R,G,B",
                    help="body colour: Lambertian albedo of the dyed fabric, each in [0,1] (default: measured body)")
-    p.add_argument("--uv-rotation", type=finite_float, default=0.0, metavar="DEG",
+    p.add_argument("--uv-rotation", type=float, default=0.0, metavar="DEG",
                    help="swatch only: turn the UVs (90 puts the warp along the other edge)")
     add_render_options(p)
 
@@ -95,8 +97,12 @@ def run(args) -> int:
     if not args.animation and args.output.lower().endswith(VIDEO_SUFFIXES):
         raise KesbrdfError(f"{args.output}: video output needs --animation DRAPE_DIR")
     check_output(args.output, VIDEO_SUFFIXES if args.animation else STILL_SUFFIXES)
-    if args.fps is not None and not args.fps > 0:
-        raise KesbrdfError(f"--fps: expected frames per second > 0, got {args.fps:g}")
+    if args.fps is not None and not 0 < args.fps <= 240:
+        raise KesbrdfError(f"--fps: expected frames per second in (0, 240], got {args.fps:g}")
+    if args.frame is not None and args.frame < 0:
+        raise KesbrdfError(f"--frame: expected a frame number >= 0, got {args.frame}")
+    if not math.isfinite(args.uv_rotation):
+        raise KesbrdfError(f"--uv-rotation: expected degrees, got {args.uv_rotation}")
     from kesbrdf.render import animation, scenes  # noqa: F401  (registers the BSDF)
 
     base = parse_rgb_flag(args.base_color, "--base-color")

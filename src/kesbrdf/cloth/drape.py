@@ -539,10 +539,3 @@ def _version_of(module: str) -> str | None:
     except Exception:  # pragma: no cover - metadata missing
         return None
 
-
-def read_frame_positions(out_dir, k: int) -> np.ndarray:
-    """Positions (N, 3) of frame ``k`` of a drape folder (convenience for tests and tools)."""
-    from kesbrdf.cloth.ply import read_ply
-
-    return read_ply(Path(out_dir) / frame_name(k)).vertices
-

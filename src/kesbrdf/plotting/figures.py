@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
 from kesbrdf.plotting._mpl import new_figure, require_matplotlib
 from kesbrdf.plotting.save import attach_provenance, provenance
 
@@ -62,7 +63,7 @@ Q_LABEL = r"$q = f_r\,\sqrt{\cos\theta_i\cos\theta_r}$ (1/sr)"
 #: Axis label of the BRDF.
 FR_LABEL = r"$f_r$ (1/sr)"
 #: The paper's orientations, degrees.
-PAPER_PSI_DEG = (0.0, 45.0, 90.0, 135.0)
+PAPER_PSI_DEG = PAPER_ORIENTATIONS_DEG
 #: Two in-plane samples belong to the same orientation when their ψ differ by less
 #: than this (degrees); files store ψ with at most a few decimals.
 PSI_TOL_DEG = 1e-3

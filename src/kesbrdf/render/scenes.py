@@ -57,6 +57,8 @@ __all__ = [
 SCENES = ("sphere", "swatch", "drape", "dressform")
 ENVIRONMENTS = ("studio", "sky", "uniform", "none")
 LIGHTS = ("area", "sun", "none")
+#: Largest image accepted (pixels): 8K UHD.  Bigger requests are a typo, not a render.
+MAX_PIXELS = 7680 * 4320
 #: Diffuse albedo of floors and dress forms.
 PROP_ALBEDO = (0.42, 0.42, 0.42)
 #: Vertical field of view of the camera, degrees.
@@ -89,6 +91,14 @@ class RenderOptions:
         w, h = self.resolution
         if not (int(w) > 0 and int(h) > 0 and int(self.spp) > 0):
             raise KesbrdfError(f"expected positive resolution and spp, got {w}x{h} and {self.spp}")
+        if int(w) * int(h) > MAX_PIXELS:
+            raise KesbrdfError(f"resolution: expected at most {MAX_PIXELS} pixels, got {w}x{h}")
+        if not 1 <= int(self.max_depth) <= 1024:
+            raise KesbrdfError(f"max_depth: expected a path length in [1, 1024], got {self.max_depth}")
+        if int(self.seed) < 0:
+            raise KesbrdfError(f"seed: expected an integer >= 0, got {self.seed}")
+        if not math.isfinite(float(self.exposure)):
+            raise KesbrdfError(f"exposure: expected a finite number of stops, got {self.exposure}")
         return self
 
     def to_json(self) -> dict:
