@@ -44,38 +44,6 @@ def pytest_pycollect_makemodule(module_path, parent):
     return None
 
 
-def _fit_and_save(path, ref, **fit_kwargs):
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
-
-    model = fit(measure(ref), **fit_kwargs)
-    model.save(path)
-    return path, model
-
-
-@pytest.fixture(scope="session")
-def render_module():
-    import kesbrdf.render
-
-    return kesbrdf.render
-
-
-@pytest.fixture(scope="session")
-def model_files(tmp_path_factory):
-    """Model files (path, Model) fitted on the paper protocol from anisotropic Ward."""
-    from kesbrdf.references.ward import AnisotropicWard
-
-    root = tmp_path_factory.mktemp("models")
-    out = {}
-    # RGB, lobe 3x wider along the weft than along the warp
-    out["rgb"] = _fit_and_save(root / "rgb.kes.json", AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1))
-    # grey, strongly anisotropic: for the UV-rotation test
-    out["aniso"] = _fit_and_save(root / "aniso.kes.json", AnisotropicWard(0.06, 0.35, rho_d=0.05, rho_s=0.15))
-    # grey, albedo below one everywhere: for the white furnace
-    out["furnace"] = _fit_and_save(root / "furnace.kes.json", AnisotropicWard(0.15, 0.3, rho_d=0.5, rho_s=0.2))
-    return out
-
-
 @pytest.fixture(scope="session")
 def rolled_model_file():
     """Factory: save a model with its table turned in φ (see :func:`_rolled_model_file`)."""

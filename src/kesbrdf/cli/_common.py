@@ -9,21 +9,21 @@ from kesbrdf.errors import KesbrdfError, validate_choice
 REFERENCES = ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
 
 
-def make_reference(name: str, params: str | None = None):
+def make_reference(name: str, params: str | None = None, flag: str = "--params"):
     """Build a reference BRDF by name (one registry; the error lists the names).
 
-    ``params`` is ``--params``'s JSON text, checked by :func:`kesbrdf.cli._params.parse_params`.
+    ``params`` is the JSON text of the option ``flag``, checked by :func:`kesbrdf.cli._params.parse_params`.
     """
     from kesbrdf.cli._params import parse_params
 
     validate_choice("reference", name, REFERENCES)
-    extra = parse_params(name, params)
+    extra = parse_params(name, params, flag)
     try:
         return _build_reference(name, extra)
     except KesbrdfError:
         raise
     except (TypeError, ValueError) as exc:  # a combination the per-parameter checks cannot see
-        raise KesbrdfError(f"--params for reference {name}: {' '.join(str(exc).split())}") from None
+        raise KesbrdfError(f"{flag} for reference {name}: {' '.join(str(exc).split())}") from None
 
 
 def _build_reference(name: str, extra: dict):

@@ -65,9 +65,9 @@ def _range_text(lo, hi, lo_open) -> str:
     return f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
 
 
-def _check(reference: str, name: str, value, spec) -> None:
+def _check(reference: str, name: str, value, spec, flag: str = "--params") -> None:
     kind, lo, hi, lo_open = spec
-    where = f"--params {name} (reference {reference})"
+    where = f"{flag} {name} (reference {reference})"
     shown = json.dumps(value)[:60]
 
     def in_range(x) -> bool:
@@ -97,7 +97,7 @@ def _check(reference: str, name: str, value, spec) -> None:
         raise RuntimeError(f"unknown parameter type {kind!r} in PARAMETERS[{reference!r}]")
 
 
-def parse_params(reference: str, text: str | None) -> dict:
+def parse_params(reference: str, text: str | None, flag: str = "--params") -> dict:
     """The checked keyword arguments of ``--params`` for ``reference`` ({} when not given).
 
     >>> parse_params("ward", '{"alpha_x": 0.1, "rho_d": [0.2, 0.1, 0.05]}')
@@ -116,23 +116,23 @@ def parse_params(reference: str, text: str | None) -> dict:
         doc = json.loads(text, parse_constant=_reject_constant)
     except (json.JSONDecodeError, RecursionError) as exc:
         msg = exc.msg if isinstance(exc, json.JSONDecodeError) else "nested too deeply"
-        raise KesbrdfError(f"--params: expected a JSON object such as '{{\"alpha_x\": 0.1}}', got invalid JSON ({msg})") from None
+        raise KesbrdfError(f"{flag}: expected a JSON object such as '{{\"alpha_x\": 0.1}}', got invalid JSON ({msg})") from None
     except ValueError as exc:  # NaN / Infinity, refused by _reject_constant
-        raise KesbrdfError(f"--params: {exc}") from None
+        raise KesbrdfError(f"{flag}: {exc}") from None
     if not isinstance(doc, dict):
-        raise KesbrdfError(f"--params: expected a JSON object of parameter names and values, got {type(doc).__name__}")
+        raise KesbrdfError(f"{flag}: expected a JSON object of parameter names and values, got {type(doc).__name__}")
     for name, value in doc.items():
         if name not in spec:
             raise KesbrdfError(
-                f"--params: unknown parameter {name!r} of reference {reference}; expected some of {', '.join(spec)}"
+                f"{flag}: unknown parameter {name!r} of reference {reference}; expected some of {', '.join(spec)}"
             )
-        _check(reference, name, value, spec[name])
+        _check(reference, name, value, spec[name], flag)
     if reference in ("ward", "satin-ward", "isotropic", "ashikhmin-shirley"):
         per_channel = [k for k, s in spec.items() if s[0] == "channels" and isinstance(doc.get(k), list)]
         sizes = {len(doc[k]) for k in per_channel if len(doc[k]) > 1}
         if len(sizes) > 1:
             raise KesbrdfError(
-                f"--params {', '.join(per_channel)} (reference {reference}): expected the same number of channels, "
+                f"{flag} {', '.join(per_channel)} (reference {reference}): expected the same number of channels, "
                 f"got {', '.join(str(len(doc[k])) for k in per_channel)}"
             )
     return doc

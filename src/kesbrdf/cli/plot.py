@@ -78,15 +78,7 @@ def load_inputs(args):
         measurement = read_measurement(args.measurement)
     reference = None
     if args.reference:
-        import json
-
-        try:
-            reference = make_reference(args.reference, args.reference_params)
-        except (json.JSONDecodeError, TypeError) as exc:
-            from kesbrdf.errors import KesbrdfError
-
-            raise KesbrdfError(f"--reference-params: expected a JSON object of {args.reference} parameters, got "
-                               f"{args.reference_params!r} ({exc})") from None
+        reference = make_reference(args.reference, args.reference_params, "--reference-params")
     return model, measurement, reference
 
 
