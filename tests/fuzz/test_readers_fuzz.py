@@ -28,6 +28,8 @@ from mutations import examples, mutated
 from kesbrdf.errors import KesbrdfError
 
 #: Examples per reader in the normal suite (each takes ~1 ms; images ~3 ms).
+pytestmark = pytest.mark.fuzz
+
 TEXT_EXAMPLES = 2000
 IMAGE_EXAMPLES = 2000
 
