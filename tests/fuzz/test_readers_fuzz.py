@@ -27,9 +27,9 @@ from mutations import examples, mutated
 
 from kesbrdf.errors import KesbrdfError
 
-#: Examples per reader in the normal suite (each takes ~1 ms; images ~3 ms).
 pytestmark = pytest.mark.fuzz
 
+#: Examples per reader in the normal suite (each takes ~1 ms; images ~3 ms).
 TEXT_EXAMPLES = 2000
 IMAGE_EXAMPLES = 2000
 
