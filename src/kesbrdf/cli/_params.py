@@ -12,7 +12,7 @@ from __future__ import annotations
 import json
 import math
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 
 __all__ = ["PARAMETERS", "parse_params"]
 
@@ -83,8 +83,7 @@ def _check(reference: str, name: str, value, spec, flag: str = "--params") -> No
         if not isinstance(value, bool):
             raise KesbrdfError(f"{where}: expected true or false, got {shown}")
     elif kind == "choice":
-        if value not in lo:
-            raise KesbrdfError(f"{where}: expected one of {', '.join(lo)}, got {shown}")
+        validate_choice(where, value if isinstance(value, str) else shown, lo)
     elif kind == "channels":
         items = value if isinstance(value, list) else [value]
         ok = 1 <= len(items) <= MAX_CHANNELS and all(_is_number(x) and in_range(float(x)) for x in items)

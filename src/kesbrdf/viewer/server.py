@@ -16,7 +16,7 @@ Errors come back as ``{"error": "<one line>"}`` with a 4xx status (the same mess
 the CLI prints for the same input); the server keeps running.  Request bodies larger
 than ``max_upload_bytes`` are refused with 413 before they are read.
 
-Limits (``docs/viewer.md``): a connection that sends nothing for
+Limits (``docs/formats.md``, "Viewer server limits"): a connection that sends nothing for
 :data:`REQUEST_TIMEOUT_S` seconds is closed (408 if a body was pending); at most
 :data:`MAX_CONNECTIONS` connections are served at once; an upload may have at most
 :data:`MAX_FIT_CHANNELS` channels and :data:`MAX_FIT_VALUES` values (413 otherwise,
