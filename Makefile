@@ -8,7 +8,7 @@ OUT ?= out/demo
 export DRJIT_LIBLLVM_PATH ?= /usr/lib/$(shell uname -m)-linux-gnu/libLLVM-19.so
 export MPLBACKEND ?= Agg
 
-.PHONY: all demo test test-py test-web bench system venv viewer clean
+.PHONY: all demo test test-py test-web bench fuzz system venv viewer clean
 
 all: test
 
@@ -32,6 +32,8 @@ viewer: viewer/node_modules/.installed
 demo: venv
 	$(VENV)/bin/kesbrdf demo -o $(OUT)
 
+# The suite includes the doctests of src/kesbrdf (tests/test_doctests.py) and a few
+# thousand fuzz examples per reader (tests/fuzz).
 test: venv
 	$(PY) -m pytest -q
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
@@ -44,6 +46,14 @@ test-web: venv viewer
 
 viewer-bundle: viewer
 	cd viewer && npm run build -- --outDir ../src/kesbrdf/viewer/static --emptyOutDir
+
+# Property-based fuzzing at full strength: 100,000 mutated inputs per reader (tests
+# marked `fuzz`; FUZZ_EXAMPLES=N for a shorter sweep).  Counts go to build/fuzz-stats.json.
+FUZZ_EXAMPLES ?= 100000
+fuzz: venv
+	@mkdir -p build
+	HYPOTHESIS_PROFILE=fuzz KESBRDF_FUZZ_EXAMPLES=$(FUZZ_EXAMPLES) KESBRDF_FUZZ_STATS=build/fuzz-stats.json \
+	  $(PY) -m pytest -q -m fuzz tests
 
 bench: venv
 	$(PY) benchmarks/run.py --output benchmarks/results.json

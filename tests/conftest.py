@@ -28,3 +28,112 @@ def random_pairs(rng):
     wi = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
     wr = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
     return wi, wr
+
+
+# -- fixtures shared by a library folder and its CLI tests (tests/cli/) --------------------
+# acquisition: a known BRDF and a small simulated rig
+@pytest.fixture
+def lambertian_rgb():
+    from acq_helpers import Lambertian
+
+    return Lambertian([0.2, 0.5, 0.8])
+
+
+@pytest.fixture
+def small_rig(tmp_path, lambertian_rgb):
+    """Frames + manifest of a Lambertian sample in a small rig; returns the manifest path."""
+    from acq_helpers import SMALL_RIG
+
+    from kesbrdf.acquisition.camera import simulate_images
+
+    return simulate_images(lambertian_rgb, tmp_path / "rig", seed=7, **SMALL_RIG)
+
+
+# plotting: a satin-like reference, its paper-protocol measurement and model
+@pytest.fixture(scope="session")
+def satin_ref():
+    """Satin-like anisotropic Ward (narrow along the warp), one channel."""
+    from kesbrdf.references.ward import AnisotropicWard
+
+    return AnisotropicWard(alpha_x=0.08, alpha_y=0.22, rho_d=0.02, rho_s=0.12)
+
+
+@pytest.fixture(scope="session")
+def satin_measurement(satin_ref):
+    """The paper's protocol (116 samples) on the satin reference, no noise."""
+    from kesbrdf.gonio import measure
+
+    m = measure(satin_ref)
+    m.sha256 = "0" * 63 + "1"  # a recognisable stand-in hash for provenance checks
+    return m
+
+
+@pytest.fixture(scope="session")
+def satin_model(satin_measurement):
+    from kesbrdf.model import fit
+
+    return fit(satin_measurement)
+
+
+# rendering: small model files fitted from reference BRDFs
+def _fit_and_save(path, ref, **fit_kwargs):
+    from kesbrdf.gonio import measure
+    from kesbrdf.model import fit
+
+    model = fit(measure(ref), **fit_kwargs)
+    model.save(path)
+    return path, model
+
+
+@pytest.fixture(scope="session")
+def render_module():
+    """kesbrdf.render (registers the BSDF); skips the test when Mitsuba is not installed."""
+    import importlib.util
+
+    for name in ("mitsuba", "drjit"):
+        try:
+            found = importlib.util.find_spec(name) is not None
+        except (ImportError, ValueError):
+            found = False
+        if not found:
+            pytest.skip(f"render tests need {name} (install kesbrdf[render])")
+    import kesbrdf.render
+
+    return kesbrdf.render
+
+
+@pytest.fixture(scope="session")
+def model_files(tmp_path_factory):
+    """Model files (path, Model) fitted on the paper protocol from anisotropic Ward."""
+    from kesbrdf.references.ward import AnisotropicWard
+
+    root = tmp_path_factory.mktemp("models")
+    out = {}
+    # RGB, lobe 3x wider along the weft than along the warp
+    out["rgb"] = _fit_and_save(root / "rgb.kes.json", AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1))
+    # grey, strongly anisotropic: for the UV-rotation test
+    out["aniso"] = _fit_and_save(root / "aniso.kes.json", AnisotropicWard(0.06, 0.35, rho_d=0.05, rho_s=0.15))
+    # grey, albedo below one everywhere: for the white furnace
+    out["furnace"] = _fit_and_save(root / "furnace.kes.json", AnisotropicWard(0.15, 0.3, rho_d=0.5, rho_s=0.2))
+    return out
+
+
+# Hypothesis profiles: "default" for the suite (derandomized, so a run is repeatable),
+# "fuzz" for `make fuzz` (HYPOTHESIS_PROFILE=fuzz): 100,000 examples per property.
+# Fuzz tests take their example count from tests/mutations.py::examples();
+# KESBRDF_FUZZ_EXAMPLES=N changes the fuzz profile's count (a shorter sweep).
+try:
+    from hypothesis import HealthCheck, settings
+except ImportError:  # pragma: no cover - hypothesis is in the test extra
+    pass
+else:
+    _quiet = [HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.filter_too_much]
+    settings.register_profile("default", deadline=None, derandomize=True, suppress_health_check=_quiet)
+    settings.register_profile(
+        "fuzz",
+        max_examples=int(os.environ.get("KESBRDF_FUZZ_EXAMPLES", "100000")),
+        deadline=None,
+        suppress_health_check=_quiet,
+        database=None,
+    )
+    settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "default"))

@@ -40,5 +40,5 @@ def test_labelled_simulated():
 def test_bad_step():
     with pytest.raises(KesbrdfError, match="divides 90"):
         protocol_geometry("paper", step_deg=7)
-    with pytest.raises(KesbrdfError, match="unknown protocol"):
+    with pytest.raises(KesbrdfError, match="protocol: expected one of paper"):
         protocol_geometry("sparse")

@@ -11,8 +11,6 @@ __all__ = [
     "spherical_to_cartesian",
     "cartesian_to_spherical",
     "in_plane_directions",
-    "normalize",
-    "wrap_angle",
 ]
 
 
@@ -58,15 +56,3 @@ def in_plane_directions(psi, theta_i, theta_r) -> tuple[np.ndarray, np.ndarray]:
     wi = spherical_to_cartesian(theta_i, psi + np.pi)
     wr = spherical_to_cartesian(theta_r, psi)
     return wi, wr
-
-
-def normalize(v) -> np.ndarray:
-    """Scale vectors on the last axis to unit length (zero vectors give NaN)."""
-    v = np.asarray(v, float)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-def wrap_angle(x, period: float = 2 * np.pi) -> np.ndarray:
-    """Wrap angles into [0, period)."""
-    return np.mod(np.asarray(x, float), period)

@@ -17,28 +17,50 @@ uncertainty is that standard deviation.  Values can go negative, as dark noise d
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
-from kesbrdf.measurement import Measurement
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG, Measurement
 
 __all__ = ["PROTOCOLS", "protocol_geometry", "measure"]
 
 PROTOCOLS = ("paper", "dense")
 
+#: Finest angle step accepted (degrees): the dense protocol at 0.5° is already
+#: 4 × 180² = 129,600 rows; finer steps grow as 1/step² without adding information
+#: a gonioreflectometer of ~1° angular resolution could have.
+MIN_STEP_DEG = 0.5
 
-def protocol_geometry(protocol: str = "paper", step_deg: float | None = None, orientations_deg=(0, 45, 90, 135)):
+#: Most orientations ψ accepted in one simulated measurement.
+MAX_ORIENTATIONS = 360
+
+
+def protocol_geometry(protocol: str = "paper", step_deg: float | None = None, orientations_deg=PAPER_ORIENTATIONS_DEG):
     """(ψ, θ_i, θ_r) arrays in radians for a protocol (module docstring)."""
-    if protocol not in PROTOCOLS:
-        raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
+    validate_choice("protocol", protocol, PROTOCOLS)
     if step_deg is None:
         step_deg = 3.0 if protocol == "paper" else 6.0
-    if not (0 < step_deg < 45) or abs(90.0 / step_deg - round(90.0 / step_deg)) > 1e-9:
-        raise KesbrdfError(f"expected a step that divides 90 deg (e.g. 3 or 6), got {step_deg:g}")
+    ok = isinstance(step_deg, (int, float, np.number)) and math.isfinite(step_deg)
+    if not ok or not (MIN_STEP_DEG <= step_deg < 45) or abs(90.0 / step_deg - round(90.0 / step_deg)) > 1e-9:
+        raise KesbrdfError(
+            f"step_deg: expected a step that divides 90 deg, at least {MIN_STEP_DEG:g} (e.g. 3 or 6), got {step_deg!r}"
+        )
     n = int(round(90.0 / step_deg))
-    psi_deg = np.asarray(orientations_deg, float)
+    try:
+        psi_deg = np.asarray(orientations_deg, float).reshape(-1)
+    except (TypeError, ValueError):
+        raise KesbrdfError(f"orientations_deg: expected a list of degrees, got {orientations_deg!r}") from None
+    bad = ~np.isfinite(psi_deg) | (psi_deg < 0) | (psi_deg >= 180)
+    if not 1 <= psi_deg.size <= MAX_ORIENTATIONS or bad.any():
+        raise KesbrdfError(
+            f"orientations_deg: expected 1 to {MAX_ORIENTATIONS} orientations psi in [0, 180) degrees, "
+            f"got {', '.join(f'{v:g}' for v in psi_deg[:8])}{' ...' if psi_deg.size > 8 else ''}"
+        )
+    if np.unique(psi_deg).size != psi_deg.size:
+        raise KesbrdfError(f"orientations_deg: expected distinct orientations, got {', '.join(f'{v:g}' for v in psi_deg)}")
     if protocol == "paper":
         k = np.arange(1, n)
         ti, tr = 90.0 - step_deg * k, step_deg * k
@@ -56,7 +78,7 @@ def measure(
     noise: float = 0.0,
     noise_floor: float = 0.0,
     rng=None,
-    orientations_deg=(0, 45, 90, 135),
+    orientations_deg=PAPER_ORIENTATIONS_DEG,
     sample: str | None = None,
 ) -> Measurement:
     """Measure ``brdf`` (callable f(wi, wr) -> (..., C)) in a protocol.
@@ -66,6 +88,9 @@ def measure(
     Measurement
         Labelled ``simulated: true`` with the generator's parameters.
     """
+    for name, value in (("noise", noise), ("noise_floor", noise_floor)):
+        if not (isinstance(value, (int, float, np.number)) and math.isfinite(value) and value >= 0):
+            raise KesbrdfError(f"{name}: expected a finite number >= 0, got {value!r}")
     psi, theta_i, theta_r = protocol_geometry(protocol, step_deg, orientations_deg)
     wi, wr = in_plane_directions(psi, theta_i, theta_r)
     values = np.asarray(brdf(wi, wr), float)

@@ -16,10 +16,13 @@ import numpy as np
 from kesbrdf.errors import MeasurementError
 from kesbrdf.geometry import spherical_to_cartesian
 
-__all__ = ["Measurement", "PAPER_ORIENTATIONS"]
+__all__ = ["Measurement", "PAPER_ORIENTATIONS", "PAPER_ORIENTATIONS_DEG"]
 
-#: The paper's four orientations ψ (warp, bias, weft, other bias), radians.
-PAPER_ORIENTATIONS = np.radians([0.0, 45.0, 90.0, 135.0])
+#: The paper's four orientations ψ (warp, bias, weft, other bias), degrees (file and CLI edge).
+PAPER_ORIENTATIONS_DEG = (0.0, 45.0, 90.0, 135.0)
+
+#: The same orientations in radians.
+PAPER_ORIENTATIONS = np.radians(PAPER_ORIENTATIONS_DEG)
 
 
 @dataclass

@@ -13,7 +13,7 @@ import numpy as np
 from kesbrdf.brdf import evaluate
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.gonio import measure
-from kesbrdf.measurement import Measurement
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG, Measurement
 from kesbrdf.model import fit
 
 __all__ = [
@@ -115,7 +115,7 @@ def leave_one_orientation_out(m: Measurement, mapping: str = "deviation", **fit_
     """
     psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
     out = {}
-    for held in (0.0, 45.0, 90.0, 135.0):
+    for held in PAPER_ORIENTATIONS_DEG:
         rows = np.abs(psi_deg - held) < 0.5
         if not rows.any():
             continue

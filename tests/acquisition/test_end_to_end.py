@@ -19,12 +19,11 @@ import numpy as np
 import pytest
 from acq_helpers import exposures, predicted_sigma
 
+from kesbrdf import brdf as brdf_module
+from kesbrdf import model as model_module
 from kesbrdf.acquisition.camera import simulate_images
 from kesbrdf.acquisition.ingest import ingest
 from kesbrdf.acquisition.sensor import Sensor
-
-model_module = pytest.importorskip("kesbrdf.model", reason="kesbrdf.model (the lead's fit) is not importable yet")
-brdf_module = pytest.importorskip("kesbrdf.brdf", reason="kesbrdf.brdf is not importable yet")
 
 #: See the module docstring.
 Z_MAX = 4.5

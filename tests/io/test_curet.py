@@ -117,7 +117,7 @@ def test_value_count_must_match_table(tmp_path):
     [
         ("1 0.1 0.0 0.2\n", r"table\.txt:1: expected 5 fields"),
         ("1 0.1 0.0 0.2 0.0\n3 0.1 0.0 0.2 0.0\n", r"table\.txt:2: expected configuration index 2, got 3"),
-        ("1 0.1 0.0 abc 0.0\n", r"table\.txt:1: expected a number, got 'abc'"),
+        ("1 0.1 0.0 abc 0.0\n", r"table\.txt:1: column 4: expected a number, got 'abc'"),
         ("1 45.0 0.0 30.0 0.0\n", r"table\.txt:1: theta_v: expected radians in \[0, pi/2\], got 45"),
         ("\n\n", r"table\.txt: expected CUReT table rows, got none"),
     ],
@@ -132,7 +132,7 @@ def test_table_errors_name_file_and_line(tmp_path, table_text, message):
 def test_non_numeric_value(tmp_path):
     (tmp_path / "table.txt").write_text("1 0.1 0.0 0.2 0.0\n2 0.3 0.0 0.4 0.0\n")
     (tmp_path / "abrdf.dat").write_text("2 0.5 0.6\n1 0.5 nan?\n")
-    with pytest.raises(FormatError, match=r"abrdf\.dat:2: expected a number, got 'nan\?'"):
+    with pytest.raises(FormatError, match=r"abrdf\.dat:2: column \d+ \(configuration \d+\): expected a number, got 'nan\?'"):
         read_curet(tmp_path / "table.txt", tmp_path / "abrdf.dat", 1)
 
 

@@ -60,7 +60,7 @@ BAD = {
     "psi_out_of_range": (GOOD_HEADER + "200,60,30,0.1\n", "psi_deg: expected degrees in [0, 180)", 4),
     "radians": ("psi_deg,theta_i_deg,theta_r_deg,value\n0,1.5,0.05,0.1\n0,1.4,0.15,0.1\n0,1.3,0.25,0.1\n0,1.2,0.35,0.1\n", "look like radians", 2),
     "duplicate_conflict": (GOOD_HEADER + "0,60,30,0.1\n0,60,30,0.2\n", "same geometry as line 4 with a conflicting value", 5),
-    "unknown_quantity": ("# quantity: luminance\npsi_deg,theta_i_deg,theta_r_deg,value\n0,60,30,0.1\n", "unknown quantity 'luminance'", None),
+    "unknown_quantity": ("# quantity: luminance\npsi_deg,theta_i_deg,theta_r_deg,value\n0,60,30,0.1\n", "quantity: expected one of brdf, reflectance_factor, radiance_ratio, got 'luminance'", 1),
     "wrong_field_count": (GOOD_HEADER + "0,60,30\n", "expected 4 fields", 4),
     "empty": ("# only comments\n", "expected a header row", None),
 }

@@ -1,7 +1,9 @@
 """Fixtures for the renderer tests: small model files fitted from reference BRDFs.
 
-Every test here needs Mitsuba 3 with an LLVM ≥ 17 backend (DESIGN §7); the whole folder
-is skipped when ``mitsuba`` is not installed.
+Every test here needs Mitsuba 3 with an LLVM ≥ 17 backend (DESIGN §7).  When ``mitsuba``
+or ``drjit`` is not installed, each test module of this folder is reported as SKIPPED
+(one entry per module, with the reason), not silently left out: the modules are not
+imported, since they need the renderer at import time.
 """
 
 import importlib.util
@@ -9,41 +11,37 @@ import importlib.util
 import numpy as np
 import pytest
 
-if importlib.util.find_spec("mitsuba") is None or importlib.util.find_spec("drjit") is None:
-    # kesbrdf[render] not installed: nothing here can run
-    collect_ignore_glob = ["test_*.py"]
+
+def _installed(name: str) -> bool:
+    try:
+        return importlib.util.find_spec(name) is not None
+    except (ImportError, ValueError):  # e.g. sys.modules[name] = None
+        return False
 
 
-def _fit_and_save(path, ref, **fit_kwargs):
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
-
-    model = fit(measure(ref), **fit_kwargs)
-    model.save(path)
-    return path, model
+MISSING = [name for name in ("mitsuba", "drjit") if not _installed(name)]
+SKIP_REASON = f"render tests need {' and '.join(MISSING)} (install kesbrdf[render])"
 
 
-@pytest.fixture(scope="session")
-def render_module():
-    import kesbrdf.render
+class _SkippedModule(pytest.File):
+    """Stands in for a test module that cannot be imported: one item, skipped with the reason."""
 
-    return kesbrdf.render
+    def collect(self):
+        yield _SkippedItem.from_parent(self, name=self.path.stem)
 
 
-@pytest.fixture(scope="session")
-def model_files(tmp_path_factory):
-    """Model files (path, Model) fitted on the paper protocol from anisotropic Ward."""
-    from kesbrdf.references.ward import AnisotropicWard
+class _SkippedItem(pytest.Item):
+    def runtest(self):
+        pytest.skip(SKIP_REASON)
 
-    root = tmp_path_factory.mktemp("models")
-    out = {}
-    # RGB, lobe 3x wider along the weft than along the warp
-    out["rgb"] = _fit_and_save(root / "rgb.kes.json", AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1))
-    # grey, strongly anisotropic: for the UV-rotation test
-    out["aniso"] = _fit_and_save(root / "aniso.kes.json", AnisotropicWard(0.06, 0.35, rho_d=0.05, rho_s=0.15))
-    # grey, albedo below one everywhere: for the white furnace
-    out["furnace"] = _fit_and_save(root / "furnace.kes.json", AnisotropicWard(0.15, 0.3, rho_d=0.5, rho_s=0.2))
-    return out
+    def reportinfo(self):
+        return self.path, None, f"{self.path.name} (skipped: {SKIP_REASON})"
+
+
+def pytest_pycollect_makemodule(module_path, parent):
+    if MISSING:
+        return _SkippedModule.from_parent(parent, path=module_path)
+    return None
 
 
 @pytest.fixture(scope="session")

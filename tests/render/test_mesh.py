@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from kesbrdf.io.ply import write_ply
 from kesbrdf.render import mesh
 
 
@@ -45,7 +46,7 @@ def test_ply_round_trip_through_mitsuba(render_module, tmp_path):
     import mitsuba as mi
 
     p, n, uv, f = mesh.folded_cloth(n=9)
-    mesh.write_ply(tmp_path / "c.ply", p, n, uv, f)
+    write_ply(tmp_path / "c.ply", p, f, n, uv)
     shape = mi.load_dict({"type": "ply", "filename": str(tmp_path / "c.ply")})
     params = mi.traverse(shape)
     np.testing.assert_allclose(np.array(params["vertex_positions"]).reshape(-1, 3), p, atol=1e-6)

@@ -109,10 +109,11 @@ def test_shading_frame_is_warp_weft_normal(render_module, tmp_path):
     """On a PLY mesh Mitsuba's local frame is (∂p/∂u, n × ∂p/∂u, n) = (warp, weft, normal)."""
     import mitsuba as mi
 
+    from kesbrdf.io.ply import write_ply
     from kesbrdf.render import mesh
 
     p, n, uv, f = mesh.swatch(n=5)
-    mesh.write_ply(tmp_path / "s.ply", p, n, uv, f)
+    write_ply(tmp_path / "s.ply", p, f, n, uv)
     scene = mi.load_dict({"type": "scene", "s": {"type": "ply", "filename": str(tmp_path / "s.ply")}})
     si = scene.ray_intersect(mi.Ray3f(mi.Point3f(0.1, 1.0, 0.1), mi.Vector3f(0, -1, 0)))
     frame = si.sh_frame
@@ -133,13 +134,13 @@ def test_drape_up_axis_is_guessed_from_the_fall(render_module, tmp_path, up):
     if up == "y":  # rewrite the frames y-up
         import mitsuba as mi
 
-        from kesbrdf.render.mesh import write_ply
+        from kesbrdf.io.ply import write_ply
 
         for name in meta["frames"]:
             params = mi.traverse(mi.load_dict({"type": "ply", "filename": str(folder / name)}))
             p = np.array(params["vertex_positions"]).reshape(-1, 3)
             f = np.array(params["faces"]).reshape(-1, 3)
             uv = np.array(params["vertex_texcoords"]).reshape(-1, 2)
-            write_ply(folder / name, np.stack([p[:, 0], p[:, 2], -p[:, 1]], -1), None, uv, f)
+            write_ply(folder / name, np.stack([p[:, 0], p[:, 2], -p[:, 1]], -1), f, None, uv)
     (folder / "drape.json").write_text(json.dumps(meta))
     assert read_drape(folder).up_axis == up

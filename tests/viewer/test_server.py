@@ -306,7 +306,7 @@ def test_view_cli_reports_a_non_model_file(tmp_path, capsys):
     (tmp_path / "x.kes.json").write_text('{"format": "something-else"}')
     assert cli_main(["view", str(tmp_path / "x.kes.json"), "--no-browser", "--port", "0"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("kesbrdf: error: ") and "expected a kesbrdf model file" in err
+    assert err.startswith("kesbrdf: error: ") and "kesbrdf-model" in err  # the model loader's message
 
 
 def test_shipped_bundle_is_complete():
@@ -351,4 +351,4 @@ def test_unknown_fallback_is_refused(server):
     body = embedded_measurement().read_bytes()
     status, _, data = request(server, "POST", "/api/fit?name=s.csv&fallback=magic", body)
     assert status == 400
-    assert json.loads(data)["error"] == "expected fallback 'error' or 'log', got 'magic'"
+    assert json.loads(data)["error"] == "fallback: expected one of error, log, got 'magic'"

@@ -4,8 +4,7 @@
  * the measurement the server read.
  */
 import './style.css';
-import { evalPairsGL } from './glcheck';
-import { evaluate, parseMeasurement, parseModel, referenceFromMetadata, sph, type KesModel, type Mapping, type Measurement, type Reference, type Vec3 } from './model';
+import { parseMeasurement, parseModel, referenceFromMetadata, sph, type KesModel, type Mapping, type Measurement, type Reference, type Vec3 } from './model';
 import { computeHemi, drawHemi, drawPolar, drawRhoGamma, measuredNear } from './plots';
 import { parsePLY } from './ply';
 import { Preview, type PreviewObject } from './preview';
@@ -349,82 +348,27 @@ function wire(): void {
   window.addEventListener('resize', () => scheduleRender());
 }
 
-// -- hooks for the browser tests ------------------------------------------------------
-function canvasStats(id: string): { mean: number; variance: number; width: number; height: number } {
-  const src = $<HTMLCanvasElement>(id);
-  const tmp = document.createElement('canvas');
-  tmp.width = src.width;
-  tmp.height = src.height;
-  const ctx = tmp.getContext('2d')!;
-  ctx.drawImage(src, 0, 0);
-  const d = ctx.getImageData(0, 0, tmp.width, tmp.height).data;
-  let s = 0;
-  let s2 = 0;
-  const n = d.length / 4;
-  for (let k = 0; k < d.length; k += 4) {
-    const l = (d[k] + d[k + 1] + d[k + 2]) / 3;
-    s += l;
-    s2 += l * l;
-  }
-  const mean = s / n;
-  return { mean, variance: s2 / n - mean * mean, width: tmp.width, height: tmp.height };
+// -- hooks for the browser tests: a separate chunk (testhooks.ts), loaded only with ?testhooks
+async function loadTestHooks(): Promise<void> {
+  if (!new URLSearchParams(location.search).has('testhooks')) return;
+  const { installTestHooks } = await import('./testhooks');
+  installTestHooks<View>({
+    state,
+    renderCount: () => renderCount,
+    setModel,
+    ensurePreview,
+    applyPreviewControls,
+    lightDir,
+    drawLightPicker,
+    renderView,
+    views: VIEWS,
+  });
 }
-
-declare global {
-  interface Window {
-    kesbrdf: Record<string, unknown>;
-  }
-}
-
-window.kesbrdf = {
-  state,
-  get renderCount() {
-    return renderCount;
-  },
-  canvasStats,
-  loadModelDoc: (doc: any, name = 'test', meas: any = null) => setModel(doc, name, meas),
-  evalPairsGL: (pairs: Array<[Vec3, Vec3]>, mapping: Mapping, body: [number, number, number] | null = null) =>
-    evalPairsGL(state.model!, pairs, mapping, body),
-  evalPairsCPU: (pairs: Array<[Vec3, Vec3]>, mapping: Mapping) =>
-    pairs.map(([wi, wr]) => Array.from(evaluate(state.model!, wi, wr, mapping))),
-  benchPreview: (frames = 20) => {
-    const p = ensurePreview();
-    applyPreviewControls();
-    return p.benchmark(frames);
-  },
-  /** Preview pixel on the swatch vs the CPU evaluator for a light (degrees) and exposure (EV). */
-  previewProbe: (thetaDeg: number, phiDeg: number, ev: number, px = 200, py = 300) => {
-    const p = ensurePreview();
-    state.thetaI = thetaDeg * DEG;
-    state.phiI = phiDeg * DEG;
-    $<HTMLSelectElement>('object').value = 'swatch';
-    $<HTMLInputElement>('exposure').value = String(ev);
-    applyPreviewControls();
-    const got = p.probe(px, py);
-    const m = state.model!;
-    const wi = lightDir();
-    const body = p.bodyOverride;
-    const f = evaluate(m, wi, got.wr, state.mapping, new Float64Array(m.nChannels), body);
-    const bodyRGB = body ?? [m.body[0], m.body[Math.min(1, m.nChannels - 1)], m.body[Math.min(2, m.nChannels - 1)]];
-    const encode = (c: number) => {
-      const x = Math.min(Math.max(c, 0), 1);
-      return 255 * (x <= 0.0031308 ? 12.92 * x : 1.055 * x ** (1 / 2.4) - 0.055);
-    };
-    // the fragment shader's radiance: f cosθi π + 0.04 body π, times 2^EV
-    const expected = [0, 1, 2].map((c) => encode((f[Math.min(c, m.nChannels - 1)] * wi[2] * Math.PI + 0.04 * bodyRGB[c] * Math.PI) * 2 ** ev));
-    drawLightPicker();
-    return { got: got.rgb, expected, wr: got.wr, hit: got.hit };
-  },
-  setView: (v: View) => {
-    state.view = v;
-    renderView();
-  },
-  views: VIEWS,
-};
 
 async function start(): Promise<void> {
   wire();
   drawLightPicker();
+  await loadTestHooks();
   try {
     const config = await api('api/config');
     await refreshModels(config.initial ?? undefined);

@@ -170,7 +170,7 @@ async function main() {
     }
 
     await test('page opens and loads the model given to `kesbrdf view`', async () => {
-      await page.goto(server.url);
+      await page.goto(`${server.url}?testhooks`); // loads the test-only hooks (src/testhooks.ts)
       await ready();
       const model = await page.evaluate(() => document.body.dataset.model);
       assert(model === 'ward.kes.json', `expected model ward.kes.json, got ${model}`);

@@ -47,8 +47,9 @@ import numpy as np
 from kesbrdf.acquisition.images import write_image
 from kesbrdf.acquisition.manifest import write_manifest
 from kesbrdf.acquisition.sensor import Sensor
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
 
 __all__ = ["simulate_images", "EXPOSURE_LADDER_S", "WHITE_LAYOUTS", "FILE_FORMATS"]
 
@@ -78,7 +79,7 @@ def simulate_images(
     protocol: str = "paper",
     step_deg: float | None = None,
     *,
-    orientations_deg=(0, 45, 90, 135),
+    orientations_deg=PAPER_ORIENTATIONS_DEG,
     size: int = 32,
     margin: int = 4,
     roi_inset: int = 2,
@@ -139,10 +140,8 @@ def simulate_images(
     from kesbrdf.gonio import protocol_geometry
 
     sensor = sensor or Sensor()
-    if whites not in WHITE_LAYOUTS:
-        raise KesbrdfError(f"whites: expected one of {', '.join(WHITE_LAYOUTS)}, got {whites!r}")
-    if file_format not in FILE_FORMATS:
-        raise KesbrdfError(f"file_format: expected one of {', '.join(FILE_FORMATS)}, got {file_format!r}")
+    validate_choice("whites", whites, WHITE_LAYOUTS)
+    validate_choice("file_format", file_format, FILE_FORMATS)
     room = isinstance(size, int) and size >= 4 and margin >= 0 and roi_inset >= 0
     if not (room and size - 2 * (margin + roi_inset) >= 1):
         raise KesbrdfError(

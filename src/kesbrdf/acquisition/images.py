@@ -26,7 +26,7 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.acquisition.sensor import RESPONSES, srgb_decode
-from kesbrdf.errors import FormatError, KesbrdfError, where
+from kesbrdf.errors import FormatError, validate_choice, where
 
 __all__ = [
     "Frame",
@@ -188,8 +188,7 @@ def linearize(frame: Frame, response: str = "linear", codes=None) -> np.ndarray:
     scales back by ``max_code`` (for float frames the codes are taken as [0, 1]).
     ``codes`` (optional) linearises a crop of the frame's pixels instead of all of them.
     """
-    if response not in RESPONSES:
-        raise KesbrdfError(f"expected response one of {', '.join(RESPONSES)}, got {response!r}")
+    validate_choice("response", response, RESPONSES)
     codes = np.asarray(frame.pixels if codes is None else codes, np.float64)
     if response == "linear":
         return codes

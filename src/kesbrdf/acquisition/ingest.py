@@ -62,7 +62,7 @@ import numpy as np
 
 from kesbrdf.acquisition.images import Frame, linearize, read_image, sha256_file
 from kesbrdf.acquisition.manifest import Manifest, ManifestRow, read_manifest
-from kesbrdf.errors import KesbrdfError, MeasurementError, where
+from kesbrdf.errors import KesbrdfError, MeasurementError, where, validate_choice
 
 __all__ = [
     "ingest",
@@ -207,8 +207,7 @@ def ingest(manifest_path, saturation: str = "reject", progress=None) -> IngestRe
     """
     from kesbrdf.measurement import Measurement
 
-    if saturation not in SATURATION_MODES:
-        raise KesbrdfError(f"saturation: expected one of {', '.join(SATURATION_MODES)}, got {saturation!r}")
+    validate_choice("saturation", saturation, SATURATION_MODES)
     manifest = read_manifest(manifest_path)
     mpath = manifest.path
     summary = {row.line: SummaryRow(row.line, row.file, row.kind, "unused") for row in manifest.rows}

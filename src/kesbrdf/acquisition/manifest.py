@@ -44,7 +44,8 @@ from pathlib import Path
 
 from kesbrdf._atomic import write_text
 from kesbrdf.acquisition.sensor import RESPONSES
-from kesbrdf.errors import FormatError, where
+from kesbrdf.errors import FormatError, validate_choice, where
+from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
 
 __all__ = [
     "Manifest",
@@ -136,25 +137,12 @@ def read_manifest(path) -> Manifest:
         Any format problem (see the module docstring).
     """
     path = Path(path)
-    data = path.read_bytes()
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"{where(path)}expected UTF-8 text, got undecodable bytes ({exc.reason})") from None
-    return parse_manifest(text, path)
+    return parse_manifest(decode_text(path.read_bytes(), path), path)
 
 
 def _parse_float(text: str, column: str, path, line: int) -> float:
-    text = text.strip()
-    if text == "":
-        return math.nan
-    try:
-        value = float(text)
-    except ValueError:
-        raise FormatError(f"{where(path, line)}column {column}: expected a number, got {text!r}") from None
-    if not math.isfinite(value):
-        raise FormatError(f"{where(path, line)}column {column}: expected a finite number, got {text!r}")
-    return value
+    """A finite number, or NaN for an empty field."""
+    return parse_number(text, column, path, line, empty=math.nan)
 
 
 def _parse_roi(text: str, path, line: int):
@@ -169,6 +157,8 @@ def _parse_roi(text: str, path, line: int):
     if len(numbers) != 4:
         raise FormatError(f"{where(path, line)}column roi: expected four integers x0,y0,x1,y1, got {text!r}")
     x0, y0, x1, y1 = numbers
+    if min(numbers) < 0:
+        raise FormatError(f"{where(path, line)}column roi: expected pixel coordinates >= 0, got {text!r}")
     if not (x1 > x0 and y1 > y0):
         raise FormatError(
             f"{where(path, line)}column roi: expected x1 > x0 and y1 > y0 (x1, y1 exclusive), got {text!r}"
@@ -183,10 +173,7 @@ def _parse_header(key: str, value: str, path, line: int):
             raise FormatError(f"{where(path, line)}white_reflectance: expected a reflectance factor in (0, 1], got {value!r}")
         return r
     if key == "response":
-        value = value.strip().lower()
-        if value not in RESPONSES:
-            raise FormatError(f"{where(path, line)}response: expected one of {', '.join(RESPONSES)}, got {value!r}")
-        return value
+        return validate_choice("response", value.strip().lower(), RESPONSES, path, line, FormatError)
     if key == "saturation_level":
         level = _parse_float(value, "saturation_level", path, line)
         if not level > 0:
@@ -204,10 +191,9 @@ def parse_manifest(text: str, path="<string>") -> Manifest:
     path = Path(path)
     base = path.parent
     header: dict = {}
-    lines = text.splitlines()
     columns = None
     rows: list[ManifestRow] = []
-    for lineno, raw in enumerate(lines, start=1):
+    for lineno, raw in split_lines(text, path):
         stripped = raw.strip()
         if not stripped:
             continue
@@ -220,7 +206,7 @@ def parse_manifest(text: str, path="<string>") -> Manifest:
                 key = key.strip()
                 header[key] = _parse_header(key, value, path, lineno)
             continue
-        cells = next(csv.reader([raw]))
+        cells = csv_fields(raw, path, lineno)
         if columns is None:
             columns = [c.strip() for c in cells]
             unknown = [c for c in columns if c not in COLUMNS]
@@ -254,10 +240,13 @@ def _parse_row(record: dict, path, base: Path, line: int) -> ManifestRow:
     file = record["file"].strip()
     if not file:
         raise FormatError(f"{where(path, line)}column file: expected a file name, got an empty field")
-    kind = record["kind"].strip().lower()
-    if kind not in KINDS:
-        raise FormatError(f"{where(path, line)}column kind: expected one of {', '.join(KINDS)}, got {record['kind']!r}")
+    if any(ord(ch) < 32 for ch in file):
+        raise FormatError(f"{where(path, line)}column file: expected a file name, got control characters in {file!r}")
+    kind = validate_choice("column kind", record["kind"].strip().lower(), KINDS, path, line, FormatError)
     angles = {c: _parse_float(record.get(c, ""), c, path, line) for c in ANGLE_COLUMNS}
+    for c in ("phi_i_deg", "phi_r_deg"):
+        if math.isfinite(angles[c]) and not -360 <= angles[c] <= 360:
+            raise FormatError(f"{where(path, line)}column {c}: expected degrees in [-360, 360], got {angles[c]:g}")
     exposure = _parse_float(record["exposure_s"], "exposure_s", path, line)
     if not exposure > 0:
         raise FormatError(f"{where(path, line)}column exposure_s: expected a positive time in seconds, got {record['exposure_s']!r}")
@@ -276,8 +265,11 @@ def _parse_row(record: dict, path, base: Path, line: int) -> ManifestRow:
             raise FormatError(
                 f"{where(path, line)}sample frame: expected psi_deg (in-plane) or phi_i_deg and phi_r_deg, got neither"
             )
-        if math.isfinite(angles["psi_deg"]) and not (0 <= angles["psi_deg"] < 180):
-            raise FormatError(f"{where(path, line)}column psi_deg: expected degrees in [0, 180), got {angles['psi_deg']:g}")
+    if math.isfinite(angles["psi_deg"]) and not (0 <= angles["psi_deg"] < 180):
+        raise FormatError(f"{where(path, line)}column psi_deg: expected degrees in [0, 180), got {angles['psi_deg']:g}")
+    for c in ("theta_i_deg", "theta_r_deg"):  # also on dark rows, where they are not used
+        if math.isfinite(angles[c]) and not 0 <= angles[c] <= 90:
+            raise FormatError(f"{where(path, line)}column {c}: expected degrees in [0, 90], got {angles[c]:g}")
     file_path = Path(file)
     if not file_path.is_absolute():
         file_path = base / file_path

@@ -37,7 +37,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 
 __all__ = ["Sensor", "RESPONSES", "srgb_encode", "srgb_decode", "vignetting_map"]
 
@@ -105,12 +105,8 @@ class Sensor:
     vignetting: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.bit_depth not in (8, 16):
-            raise KesbrdfError(f"sensor bit_depth: expected 8 or 16, got {self.bit_depth!r}")
-        if self.response not in RESPONSES:
-            raise KesbrdfError(
-                f"sensor response: expected one of {', '.join(RESPONSES)}, got {self.response!r}"
-            )
+        validate_choice("sensor bit_depth", self.bit_depth, (8, 16))
+        validate_choice("sensor response", self.response, RESPONSES)
         if not (self.full_well_e > 0 and self.read_noise_e >= 0 and self.dark_current_e_per_s >= 0):
             raise KesbrdfError(
                 "sensor: expected full_well_e > 0, read_noise_e >= 0, dark_current_e_per_s >= 0, "

@@ -2,17 +2,31 @@
 
 from __future__ import annotations
 
-import json
 import sys
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 
 REFERENCES = ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
 
 
-def make_reference(name: str, params: str | None = None):
-    """Build a reference BRDF by name (one registry; the error lists the names)."""
-    extra = json.loads(params) if params else {}
+def make_reference(name: str, params: str | None = None, flag: str = "--params"):
+    """Build a reference BRDF by name (one registry; the error lists the names).
+
+    ``params`` is the JSON text of the option ``flag``, checked by :func:`kesbrdf.cli._params.parse_params`.
+    """
+    from kesbrdf.cli._params import parse_params
+
+    validate_choice("reference", name, REFERENCES)
+    extra = parse_params(name, params, flag)
+    try:
+        return _build_reference(name, extra)
+    except KesbrdfError:
+        raise
+    except (TypeError, ValueError) as exc:  # a combination the per-parameter checks cannot see
+        raise KesbrdfError(f"{flag} for reference {name}: {' '.join(str(exc).split())}") from None
+
+
+def _build_reference(name: str, extra: dict):
     if name == "ward":
         from kesbrdf.references.ward import AnisotropicWard
 
@@ -40,7 +54,7 @@ def make_reference(name: str, params: str | None = None):
         if name == "sadeghi-black-satin":
             return sadeghi2013.black_satin(**extra)
         return sadeghi2013.Sadeghi2013(preset="satin", **extra)
-    raise KesbrdfError(f"unknown reference {name!r}; expected one of {', '.join(REFERENCES)}")
+    raise RuntimeError(f"reference {name!r} is listed in REFERENCES but has no constructor")
 
 
 def stderr(text: str) -> None:
@@ -63,3 +77,36 @@ def print_metrics(result: dict, title: str = "") -> None:
     for ch, m in rows.items():
         table.add_row(ch, str(m["n"]), f"{m['rmse']:.4g}", f"{m['nrmse']:.4g}", f"{m['log_rmse']:.4g}", f"{m['max_abs']:.4g}")
     Console().print(table)
+
+
+def check_output(path, suffixes: tuple[str, ...], flag: str = "-o"):
+    """Check an output path before any long work starts; return it as a :class:`~pathlib.Path`.
+
+    The suffix must be one of ``suffixes`` (case-insensitive; ``()`` accepts any), the
+    path must not be an existing folder, and its nearest existing parent must be a
+    writable folder (missing folders are created when the output is written).
+
+    Raises
+    ------
+    KesbrdfError
+        One line naming ``flag`` and the path.
+    """
+    import os
+    from pathlib import Path
+
+    out = Path(path)
+    if suffixes and not out.name.lower().endswith(tuple(s.lower() for s in suffixes)):
+        raise KesbrdfError(
+            f"{flag} {out}: expected a file ending in {', '.join(suffixes)}, got {out.suffix or 'no suffix'!r}"
+        )
+    if out.is_dir():
+        raise KesbrdfError(f"{flag} {out}: expected a file name, got an existing folder")
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not parent.is_dir():
+        raise KesbrdfError(f"{flag} {out}: expected a folder to write into, but {parent} is a file")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise KesbrdfError(f"{flag} {out}: folder {parent} is not writable")
+    return out
+

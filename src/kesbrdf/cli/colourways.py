@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 from kesbrdf.cli.render import add_render_options, render_options
 
 HELP = "Render a contact sheet of one garment in >= 6 colourways (same gloss and anisotropy, new body colour)."
@@ -21,6 +21,11 @@ def add_arguments(p):
 
 
 def run(args) -> int:
+    check_output(args.output, (".png",))
+    if args.columns < 1:
+        from kesbrdf.errors import KesbrdfError
+
+        raise KesbrdfError(f"--columns: expected tiles per row >= 1, got {args.columns}")
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
     from kesbrdf.render import colourways

@@ -50,7 +50,14 @@ def _counts_line(rows) -> str:
     return ", ".join(f"{n} {s}" for s, n in counts.items() if n or s in ("used", "rejected"))
 
 
+def _check_output(args) -> None:
+    from kesbrdf.cli._common import check_output
+
+    check_output(args.output, (".csv",))
+
+
 def run(args) -> int:
+    _check_output(args)
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 

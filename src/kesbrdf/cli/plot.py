@@ -54,7 +54,7 @@ def _gamma_list(text: str):
         values = [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
         raise KesbrdfError(f"--gamma-deg: expected numbers separated by commas, got {text!r}") from None
-    if not values or any(abs(v) >= 90 for v in values):
+    if not values or not all(abs(v) < 90 for v in values):  # also refuses nan
         raise KesbrdfError(f"--gamma-deg: expected values in (-90, 90), got {text!r}")
     return values
 
@@ -78,15 +78,7 @@ def load_inputs(args):
         measurement = read_measurement(args.measurement)
     reference = None
     if args.reference:
-        import json
-
-        try:
-            reference = make_reference(args.reference, args.reference_params)
-        except (json.JSONDecodeError, TypeError) as exc:
-            from kesbrdf.errors import KesbrdfError
-
-            raise KesbrdfError(f"--reference-params: expected a JSON object of {args.reference} parameters, got "
-                               f"{args.reference_params!r} ({exc})") from None
+        reference = make_reference(args.reference, args.reference_params, "--reference-params")
     return model, measurement, reference
 
 
@@ -96,6 +88,10 @@ def run(args) -> int:
 
     outputs = _outputs(args)
     gamma_deg = _gamma_list(args.gamma_deg)
+    if not 10 <= args.dpi <= 1200:
+        from kesbrdf.errors import KesbrdfError
+
+        raise KesbrdfError(f"--dpi: expected a resolution in [10, 1200] dots per inch, got {args.dpi}")
     model, measurement, reference = load_inputs(args)
     extra = {"model_file": str(args.model), "model_file_sha256": _sha256(args.model)}
     for name, path in outputs:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import stderr
+import math
+
+from kesbrdf.cli._common import check_output, stderr
 from kesbrdf.errors import KesbrdfError
 
 HELP = "Render a model (sphere, swatch, draped cloth or dress form) with Mitsuba 3; --animation renders a drape sequence."
@@ -86,7 +88,21 @@ def add_arguments(p):
     add_render_options(p)
 
 
+STILL_SUFFIXES = (".png", ".jpg", ".jpeg", ".exr")
+VIDEO_SUFFIXES = (".mp4", ".gif")
+
+
 def run(args) -> int:
+    # the output is checked before Mitsuba is even imported (a render takes seconds to minutes)
+    if not args.animation and args.output.lower().endswith(VIDEO_SUFFIXES):
+        raise KesbrdfError(f"{args.output}: video output needs --animation DRAPE_DIR")
+    check_output(args.output, VIDEO_SUFFIXES if args.animation else STILL_SUFFIXES)
+    if args.fps is not None and not 0 < args.fps <= 240:
+        raise KesbrdfError(f"--fps: expected frames per second in (0, 240], got {args.fps:g}")
+    if args.frame is not None and args.frame < 0:
+        raise KesbrdfError(f"--frame: expected a frame number >= 0, got {args.frame}")
+    if not math.isfinite(args.uv_rotation):
+        raise KesbrdfError(f"--uv-rotation: expected degrees, got {args.uv_rotation}")
     from kesbrdf.render import animation, scenes  # noqa: F401  (registers the BSDF)
 
     base = parse_rgb_flag(args.base_color, "--base-color")
@@ -113,8 +129,6 @@ def run(args) -> int:
         note = f" ({len(kept)} frame(s) kept from an earlier run)" if kept else ""
         stderr(f"wrote {out}{note}")
         return 0
-    if args.output.lower().endswith((".mp4", ".gif")):
-        raise KesbrdfError(f"{args.output}: video output needs --animation DRAPE_DIR")
     stderr(f"rendering {args.scene} at {opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
     out = scenes.render_still(args.model, args.scene, args.output, opts, drape=args.drape, frame=args.frame)
     stderr(f"wrote {out}")

@@ -29,6 +29,8 @@ def run(args) -> int:
     out = Path(args.output)
     if out.suffix.lower() not in (".html", ".htm"):
         raise KesbrdfError(f"-o {out}: expected a file ending in .html, got {out.suffix or 'no suffix'!r}")
+    if args.figures_dir and Path(args.figures_dir).exists() and not Path(args.figures_dir).is_dir():
+        raise KesbrdfError(f"--figures-dir {args.figures_dir}: expected a folder, got an existing file")
     model, measurement, reference = load_inputs(args)
     stderr("computing metrics and diagnostics ...")
     metrics, diagnostics = collect(model, measurement, reference, mapping=args.mapping)

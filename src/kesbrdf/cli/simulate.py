@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import REFERENCES, make_reference, stderr
+from kesbrdf.cli._common import REFERENCES, check_output, make_reference, stderr
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
 
 HELP = "Measure a reference BRDF in the paper's (or a denser) protocol; writes a measurement CSV."
 
@@ -13,7 +14,8 @@ def add_arguments(p):
     p.add_argument("--params", help="JSON object of reference parameters, e.g. '{\"alpha_x\": 0.1}'")
     p.add_argument("--protocol", default="paper", choices=("paper", "dense"))
     p.add_argument("--step-deg", type=float, default=None, help="angle step (paper: 3, dense: 6)")
-    p.add_argument("--orientations-deg", default="0,45,90,135", help="comma-separated ψ values")
+    p.add_argument("--orientations-deg", default=",".join(f"{v:g}" for v in PAPER_ORIENTATIONS_DEG),
+                   help="comma-separated ψ values (default: the paper's 0,45,90,135)")
     p.add_argument("--noise", type=float, default=0.0, help="relative noise (std / value)")
     p.add_argument("--noise-floor", type=float, default=0.0, help="absolute noise std, 1/sr")
     p.add_argument("--seed", type=int, default=0)
@@ -28,6 +30,11 @@ def run(args) -> int:
     from kesbrdf.gonio import measure
     from kesbrdf.io.measurement_csv import write_measurement
 
+    check_output(args.output, (".csv",))
+    if args.seed < 0:
+        raise KesbrdfError(f"--seed: expected an integer >= 0, got {args.seed}")
+    if args.vignetting and not args.images:
+        raise KesbrdfError("--vignetting: applies to camera frames only; add --images DIR")
     try:
         orientations = tuple(float(x) for x in args.orientations_deg.split(","))
     except ValueError:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from kesbrdf.cli._common import print_metrics, stderr
+from kesbrdf.cli._common import check_output, print_metrics, stderr
 
 HELP = "Compare a model with a measurement CSV; prints per-channel RMSE, relative, log and max errors."
 
@@ -23,6 +23,8 @@ def run(args) -> int:
     from kesbrdf.model import load
     from kesbrdf.validation import validate
 
+    if args.json_out:
+        check_output(args.json_out, (".json",), "--json")
     model = load(args.model)
     m = read_measurement(args.measurement)
     result = validate(model, m, args.mapping)

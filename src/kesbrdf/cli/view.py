@@ -44,7 +44,7 @@ def run(args) -> int:
 
     if not 0 <= args.port <= 65535:
         raise KesbrdfError(f"--port: expected 0..65535, got {args.port}")
-    if args.max_upload_mb <= 0:
+    if not 0 < args.max_upload_mb <= 4096:  # also refuses nan and inf
         raise KesbrdfError(f"--max-upload-mb: expected a positive size, got {args.max_upload_mb}")
     model_files: list[Path] = []
     model_dirs = [Path(d) for d in args.models]

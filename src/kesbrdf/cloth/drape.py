@@ -53,7 +53,7 @@ from kesbrdf._atomic import atomic_path, write_text
 from kesbrdf._version import __version__
 from kesbrdf.cloth import scenes as _scenes
 from kesbrdf.cloth.ply import vertex_normals, write_ply
-from kesbrdf.errors import KesbrdfError, where
+from kesbrdf.errors import KesbrdfError, where, validate_choice
 
 __all__ = ["DrapeError", "DrapeParameters", "SCENES", "simulate_drape", "frame_name", "load_checkpoint"]
 
@@ -109,8 +109,7 @@ class DrapeParameters:
     self_contact: bool = True
 
     def validate(self) -> "DrapeParameters":
-        if self.scene not in SCENES:
-            raise DrapeError(f"drape: expected scene one of {', '.join(SCENES)}, got {self.scene!r}")
+        validate_choice("drape scene", self.scene, SCENES, error=DrapeError)
         checks = (
             ("fps", self.fps, 0.0, 240.0, False),
             ("resolution", self.resolution, 4, 256, True),
@@ -539,11 +538,4 @@ def _version_of(module: str) -> str | None:
         return version({"warp": "warp-lang"}.get(module, module))
     except Exception:  # pragma: no cover - metadata missing
         return None
-
-
-def read_frame_positions(out_dir, k: int) -> np.ndarray:
-    """Positions (N, 3) of frame ``k`` of a drape folder (convenience for tests and tools)."""
-    from kesbrdf.cloth.ply import read_ply
-
-    return read_ply(Path(out_dir) / frame_name(k)).vertices
 

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf.errors import FormatError, MeasurementError, where
+from kesbrdf.io.text import parse_number, split_lines
 from kesbrdf.measurement import Measurement
 
 __all__ = ["read_curet", "FABRICS", "CITATION", "N_CONFIGURATIONS", "sample_name"]
@@ -61,6 +62,9 @@ CITATION = (
 #: Polar angles above this (radians) cannot be directions above the sample.
 THETA_MAX = math.pi / 2 + 1e-9
 
+#: Azimuths beyond one turn either way (radians) are refused as a units or format error.
+PHI_MAX = 2 * math.pi + 1e-9
+
 
 def sample_name(sample: int) -> str:
     """``"CUReT sample 42 (corduroy)"``; non-fabric samples get no name."""
@@ -68,15 +72,28 @@ def sample_name(sample: int) -> str:
     return f"CUReT sample {int(sample)}" + (f" ({name})" if name else "")
 
 
+def _decode_ascii(data: bytes, path: Path, what: str) -> str:
+    try:
+        return data.decode("ascii")
+    except UnicodeDecodeError as exc:
+        line = data[: exc.start].count(b"\n") + 1
+        raise FormatError(
+            f"{where(path, line)}expected a plain-text (ASCII) CUReT {what} file, got the byte "
+            f"0x{data[exc.start:exc.start + 1].hex()}"
+        ) from None
+
+
+def _numbers(fields, path: Path, lineno: int) -> list[float]:
+    """Finite floats of bounded magnitude (:func:`kesbrdf.io.text.parse_number`)."""
+    return [parse_number(f, f"{k + 1}", path, lineno) for k, f in enumerate(fields)]
+
+
 def _numeric_rows(path: Path, n_fields: int, what: str):
     """(line numbers, float array (rows, n_fields)) of a whitespace-separated file."""
     data = path.read_bytes()
-    try:
-        text = data.decode("ascii")
-    except UnicodeDecodeError:
-        raise FormatError(f"{where(path)}expected a plain-text CUReT {what} file, got binary data") from None
+    text = _decode_ascii(data, path, what)
     linenos, rows = [], []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in split_lines(text, path):
         fields = raw.split()
         if not fields or fields[0].startswith("#"):
             continue
@@ -84,26 +101,11 @@ def _numeric_rows(path: Path, n_fields: int, what: str):
             raise FormatError(
                 f"{where(path, lineno)}expected {n_fields} fields in a CUReT {what} row, got {len(fields)}"
             )
-        try:
-            values = [float(f) for f in fields]
-        except ValueError:
-            bad = next(f for f in fields if not _is_float(f))
-            raise FormatError(f"{where(path, lineno)}expected a number, got {bad!r}") from None
-        if not all(math.isfinite(v) for v in values):
-            raise FormatError(f"{where(path, lineno)}expected finite numbers, got {raw.strip()[:60]!r}")
         linenos.append(lineno)
-        rows.append(values)
+        rows.append(_numbers(fields, path, lineno))
     if not rows:
         raise FormatError(f"{where(path)}expected CUReT {what} rows, got none")
     return np.array(linenos), np.array(rows), hashlib.sha256(data).hexdigest()
-
-
-def _is_float(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
 
 
 def read_table(table_path):
@@ -131,6 +133,13 @@ def read_table(table_path):
             k = int(np.argmax(bad))
             raise FormatError(
                 f"{where(path, int(linenos[k]))}{name}: expected radians in [0, pi/2], got {rows[k, col]:g}"
+            )
+    for col, name in ((2, "phi_v"), (4, "phi_i")):
+        bad = np.abs(rows[:, col]) > PHI_MAX
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise FormatError(
+                f"{where(path, int(linenos[k]))}{name}: expected radians in [-2 pi, 2 pi], got {rows[k, col]:g}"
             )
     return rows[:, 1], rows[:, 2], rows[:, 3], rows[:, 4], sha
 
@@ -166,19 +175,17 @@ def read_curet(table_path, abrdf_path, sample) -> Measurement:
     n = theta_v.size
     data = abrdf_path.read_bytes()
     # the row length is checked against the table, so read rows of any length first
-    try:
-        text = data.decode("ascii")
-    except UnicodeDecodeError:
-        raise FormatError(f"{where(abrdf_path)}expected a plain-text CUReT abrdf file, got binary data") from None
+    text = _decode_ascii(data, abrdf_path, "abrdf")
     found = None
     seen = []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in split_lines(text, abrdf_path):
         fields = raw.split()
         if not fields or fields[0].startswith("#"):
             continue
-        if not _is_float(fields[0]) or float(fields[0]) != int(float(fields[0])):
+        first = parse_number(fields[0], "1 (sample number)", abrdf_path, lineno)
+        if first != int(first):
             raise FormatError(f"{where(abrdf_path, lineno)}expected an integer sample number, got {fields[0]!r}")
-        number = int(float(fields[0]))
+        number = int(first)
         seen.append(number)
         if number != int(sample):
             continue
@@ -191,16 +198,9 @@ def read_curet(table_path, abrdf_path, sample) -> Measurement:
                 f"{where(abrdf_path, lineno)}expected 1 + {n} fields (sample number and one value per "
                 f"configuration of {table_path.name}), got {len(fields)}"
             )
-        try:
-            values = np.array([float(f) for f in fields[1:]])
-        except ValueError:
-            bad = next(f for f in fields[1:] if not _is_float(f))
-            raise FormatError(f"{where(abrdf_path, lineno)}expected a number, got {bad!r}") from None
-        if not np.all(np.isfinite(values)):
-            k = int(np.argmax(~np.isfinite(values)))
-            raise FormatError(
-                f"{where(abrdf_path, lineno)}expected finite values, got {fields[k + 1]!r} (configuration {k + 1})"
-            )
+        values = np.array(
+            [parse_number(f, f"{k + 2} (configuration {k + 1})", abrdf_path, lineno) for k, f in enumerate(fields[1:])]
+        )
         found = (lineno, values)
     if found is None:
         got = f"{min(seen)}..{max(seen)}" if seen else "none"

@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf._atomic import write_text
-from kesbrdf.errors import FormatError, MeasurementError, where
+from kesbrdf.errors import FormatError, MeasurementError, validate_choice, where
+from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
 from kesbrdf.measurement import Measurement
 
 __all__ = ["read_measurement", "write_measurement", "QUANTITIES", "FORMAT_VERSION"]
@@ -60,20 +61,17 @@ def read_measurement(path) -> Measurement:
     """
     path = Path(path)
     data = path.read_bytes()
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError as exc:
-        raise FormatError(f"{where(path)}expected UTF-8 text, got undecodable bytes ({exc.reason})") from None
-    return parse_measurement(text, source=str(path), sha256=_sha256(data))
+    return parse_measurement(decode_text(data, path), source=str(path), sha256=_sha256(data))
 
 
 def parse_measurement(text: str, source: str = "<string>", sha256: str | None = None) -> Measurement:
     """Parse measurement CSV ``text``; ``source`` names it in error messages."""
     metadata: dict[str, str] = {}
+    metadata_lines: dict[str, int] = {}
     header: list[str] | None = None
     header_line = 0
     rows: list[tuple[int, list[str]]] = []
-    for lineno, raw in enumerate(text.splitlines(), start=1):
+    for lineno, raw in split_lines(text, source):
         line = raw.strip()
         if not line:
             continue
@@ -83,8 +81,9 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
                 if ":" in body:
                     key, value = body.split(":", 1)
                     metadata[key.strip().lower()] = value.strip()
+                    metadata_lines[key.strip().lower()] = lineno
             continue
-        fields = next(csv.reader([line]))
+        fields = csv_fields(line, source, lineno)
         if header is None:
             header = [f.strip() for f in fields]
             header_line = lineno
@@ -96,13 +95,10 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
     version = metadata.get("kesbrdf-measurement", str(FORMAT_VERSION))
     if version != str(FORMAT_VERSION):
         raise FormatError(
-            f"{where(source)}expected measurement format version {FORMAT_VERSION}, got {version!r}"
+            f"{where(source, metadata_lines.get('kesbrdf-measurement'))}expected measurement format version {FORMAT_VERSION}, got {version!r}"
         )
-    quantity = metadata.get("quantity", "brdf").lower()
-    if quantity not in QUANTITIES:
-        raise FormatError(
-            f"{where(source)}unknown quantity {quantity!r}; expected one of {', '.join(QUANTITIES)}"
-        )
+    quantity = validate_choice("quantity", metadata.get("quantity", "brdf").lower(), QUANTITIES, source,
+                               metadata_lines.get("quantity"), FormatError)
 
     columns = _classify_columns(header, source, header_line)
     geometry, channels, unc_cols, text_cols = columns
@@ -120,18 +116,7 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
                 f"{where(source, lineno)}expected {len(header)} fields as in the header, got {len(fields)}"
             )
         for name in numeric_names:
-            cell = fields[index[name]]
-            try:
-                value = float(cell)
-            except ValueError:
-                raise FormatError(
-                    f"{where(source, lineno)}column {name}: expected a number, got {cell!r}"
-                ) from None
-            if not math.isfinite(value):
-                raise FormatError(
-                    f"{where(source, lineno)}column {name}: expected a finite number, got {cell!r}"
-                )
-            numeric[name][r] = value
+            numeric[name][r] = parse_number(fields[index[name]], name, source, lineno)
         for name in text_cols:
             text_values[name].append(fields[index[name]])
     linenos = np.array([ln for ln, _ in rows])
@@ -139,10 +124,7 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
     _check_angles(numeric, geometry, linenos, source)
     if "flag" in text_values:
         for k, flag in enumerate(text_values["flag"]):
-            if flag not in FLAGS:
-                raise FormatError(
-                    f"{where(source, int(linenos[k]))}column flag: expected one of {', '.join(FLAGS)}, got {flag!r}"
-                )
+            validate_choice("column flag", flag, FLAGS, source, int(linenos[k]), FormatError)
 
     values = np.stack([numeric[c] for c in channels], axis=-1)
     uncertainty = None
@@ -169,10 +151,31 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
         phi_i = np.mod(np.radians(numeric["phi_i_deg"]), 2 * np.pi)
         phi_r = np.mod(np.radians(numeric["phi_r_deg"]), 2 * np.pi)
 
+    if quantity == "radiance_ratio":
+        grazing = numeric["theta_i_deg"] >= 90.0
+        if grazing.any():
+            k = int(np.argmax(grazing))
+            raise FormatError(
+                f"{where(source, int(linenos[k]))}column theta_i_deg: expected degrees in [0, 90) for quantity "
+                f"radiance_ratio (f_r = ratio / cos theta_i is unbounded at 90), got {numeric['theta_i_deg'][k]:g}"
+            )
     scale = _to_brdf_scale(quantity, theta_i)
-    values = values * scale[:, None]
-    if uncertainty is not None:
-        uncertainty = uncertainty * scale[:, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        values = values * scale[:, None]
+        if uncertainty is not None:
+            uncertainty = uncertainty * scale[:, None]
+    # finite in the file is not enough: 1/cos(theta_i) of radiance_ratio grows without bound
+    for array, what in ((values, ""), (uncertainty, "_unc")):
+        if array is None:
+            continue
+        bad = np.argwhere(~np.isfinite(array))
+        if bad.size:
+            r, c = bad[0]
+            raise FormatError(
+                f"{where(source, int(linenos[r]))}column {channels[c]}{what}: expected a value that stays "
+                f"finite as f_r in 1/sr, got an overflow converting {quantity} at theta_i_deg "
+                f"{numeric['theta_i_deg'][r]:g}"
+            )
 
     _check_duplicates(psi, theta_i, phi_i, theta_r, phi_r, values, uncertainty, linenos, source)
 

@@ -30,7 +30,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
+from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
 from kesbrdf.plotting._mpl import new_figure, require_matplotlib
 from kesbrdf.plotting.save import attach_provenance, provenance
 
@@ -62,7 +63,7 @@ Q_LABEL = r"$q = f_r\,\sqrt{\cos\theta_i\cos\theta_r}$ (1/sr)"
 #: Axis label of the BRDF.
 FR_LABEL = r"$f_r$ (1/sr)"
 #: The paper's orientations, degrees.
-PAPER_PSI_DEG = (0.0, 45.0, 90.0, 135.0)
+PAPER_PSI_DEG = PAPER_ORIENTATIONS_DEG
 #: Two in-plane samples belong to the same orientation when their ψ differ by less
 #: than this (degrees); files store ψ with at most a few decimals.
 PSI_TOL_DEG = 1e-3
@@ -393,7 +394,7 @@ def plot_hemisphere(
     elif scale == "linear":
         norm, cmap = Normalize(vmin, vmax), "magma"
     else:
-        raise ValueError(f"expected scale 'linear' or 'log', got {scale!r}")
+        validate_choice("scale", scale, ("linear", "log"))
     mappable = None
     if values is not None:
         mappable = ax.imshow(np.asarray(values, float), origin="lower", extent=extent, norm=norm, cmap=cmap,
@@ -604,8 +605,7 @@ def hemisphere_grid(n: int, projection: str = "equal-area") -> dict:
         ``u, v, theta, phi`` (n, n) (row = v index from −1 up), ``inside`` (n, n) bool,
         ``extent`` for imshow, ``label`` describing the projection.
     """
-    if projection not in ("equal-area", "theta-linear"):
-        raise KesbrdfError(f"expected projection 'equal-area' or 'theta-linear', got {projection!r}")
+    validate_choice("projection", projection, ("equal-area", "theta-linear"))
     c = np.linspace(-1.0, 1.0, n)
     half = 1.0 / (n - 1) if n > 1 else 1.0
     u, v = np.meshgrid(c, c)
@@ -927,8 +927,7 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
     from kesbrdf.geometry import spherical_to_cartesian
 
     _require(model, "model", "6")
-    if difference not in ("log", "relative"):
-        raise KesbrdfError(f"figure 6: expected difference 'log' or 'relative', got {difference!r}")
+    validate_choice("figure 6 difference", difference, ("log", "relative"))
     grid = hemisphere_grid(n, projection)
     inside = grid["inside"]
     wr = spherical_to_cartesian(grid["theta"][inside], grid["phi"][inside])

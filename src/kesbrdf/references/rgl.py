@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf._drjit import import_mitsuba
-from kesbrdf.errors import FormatError, where
+from kesbrdf.errors import FormatError, where, validate_choice
 
 __all__ = ["RGLMeasured", "read_tensor_file", "eval_plugin", "load_plugin", "VARIANT", "TENSOR_FIELDS_RGB"]
 
@@ -209,8 +209,7 @@ class RGLMeasured:
     channels = ("R", "G", "B")
 
     def __init__(self, path, parameterised_by: str = "light"):
-        if parameterised_by not in ("light", "viewer"):
-            raise FormatError(f"expected parameterised_by 'light' or 'viewer', got {parameterised_by!r}")
+        validate_choice("parameterised_by", parameterised_by, ("light", "viewer"), error=FormatError)
         self.path = Path(path)
         self.parameterised_by = parameterised_by
         fields = read_tensor_file(self.path)

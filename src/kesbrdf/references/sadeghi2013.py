@@ -100,7 +100,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, validate_choice
 
 __all__ = [
     "Family",
@@ -378,11 +378,9 @@ PRESET_NAMES = tuple(PRESETS)
 
 
 def _validate_name(kind: str, name: object, valid: tuple[str, ...]) -> str:
-    if not isinstance(name, str) or name not in valid:
-        raise Sadeghi2013Error(
-            f"Sadeghi2013 {kind}: expected one of {', '.join(valid)}; got {name!r}"
-        )
-    return name
+    if not isinstance(name, str):
+        name = repr(name)  # e.g. a number: still listed among the valid names
+    return validate_choice(f"Sadeghi2013 {kind}", name, valid, error=Sadeghi2013Error)
 
 
 # ---------------------------------------------------------------------------------------

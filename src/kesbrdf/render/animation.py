@@ -12,13 +12,12 @@ imageio-ffmpeg, GIF through Pillow), also atomically, and a sidecar
 from __future__ import annotations
 
 import json
-import os
 from pathlib import Path
 
 import numpy as np
 
-from kesbrdf._atomic import write_text
-from kesbrdf.errors import KesbrdfError, where
+from kesbrdf._atomic import atomic_path, write_text
+from kesbrdf.errors import KesbrdfError, validate_choice, where
 from kesbrdf.render import scenes as _scenes
 
 __all__ = ["render_animation", "encode_video", "VIDEO_FORMATS"]
@@ -38,8 +37,7 @@ def encode_video(frame_paths, output, fps: float) -> Path:
     ext = output.suffix.lower()
     if ext not in VIDEO_FORMATS:
         raise KesbrdfError(f"{where(output)}expected an animation file ending .mp4 or .gif, got {ext or 'no suffix'!r}")
-    tmp = output.with_name(f".{output.stem}.partial{ext}")
-    try:
+    with atomic_path(output, keep_suffix=True) as tmp:
         if ext == ".gif":
             images = [Image.open(p).convert("RGB") for p in frame_paths]
             images = [im.quantize(colors=256, method=Image.Quantize.MEDIANCUT) for im in images]
@@ -58,10 +56,6 @@ def encode_video(frame_paths, output, fps: float) -> Path:
                     writer.append_data(np.asarray(Image.open(p).convert("RGB")))
             finally:
                 writer.close()
-        os.replace(tmp, output)
-    finally:
-        if tmp.exists():
-            tmp.unlink()
     return output
 
 
@@ -99,8 +93,7 @@ def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions
         raise FileNotFoundError(2, "No such file or directory", str(model_path))
     drape = _scenes.read_drape(drape_dir)
     scene = scene or ("dressform" if drape.scene == "dressform" else "drape")
-    if scene not in ("drape", "dressform"):
-        raise KesbrdfError(f"animation: expected scene 'drape' or 'dressform', got {scene!r}")
+    validate_choice("animation scene", scene, ("drape", "dressform"))
     fps = float(fps or drape.fps)
     frames_dir = Path(frames_dir) if frames_dir else output.with_name(output.stem + "_frames")
     frames_dir.mkdir(parents=True, exist_ok=True)

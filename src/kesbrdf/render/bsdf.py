@@ -55,7 +55,7 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-from kesbrdf.errors import ModelError, where
+from kesbrdf.errors import ModelError, validate_choice, where
 from kesbrdf.kinds import require_kind
 from kesbrdf.render import sampling as _sampling
 
@@ -140,20 +140,15 @@ class KesBSDF(mi.BSDF):
         model = load(path)
         self.filename = str(path)
         mapping = str(_prop(props, "mapping", "deviation"))
-        if mapping not in MAPPINGS:
-            extra = (
-                " ('paper' is singular and not reciprocal; render with deviation or halfvector, "
-                "see docs/rendering.md)"
-                if mapping == "paper"
-                else ""
-            )
+        if mapping == "paper":
             raise ModelError(
-                f"kesbrdf BSDF: unknown mapping {mapping!r}; expected one of {', '.join(MAPPINGS)}{extra}"
+                f"kesbrdf BSDF mapping: expected one of {', '.join(MAPPINGS)}, got 'paper' ('paper' is "
+                "singular and not reciprocal; render with deviation or halfvector, see docs/rendering.md)"
             )
+        validate_choice("kesbrdf BSDF mapping", mapping, MAPPINGS, error=ModelError)
         self.mapping = mapping
         sampling = str(_prop(props, "sampling", "lobe"))
-        if sampling not in SAMPLINGS:
-            raise ModelError(f"kesbrdf BSDF: unknown sampling {sampling!r}; expected one of {', '.join(SAMPLINGS)}")
+        validate_choice("kesbrdf BSDF sampling", sampling, SAMPLINGS, error=ModelError)
         self.two_sided = bool(_prop(props, "two_sided", False))
 
         table, body = model_rgb(model, path)

@@ -1,4 +1,4 @@
-"""Procedural cloth and garment meshes with warp-carrying UVs, and a binary PLY writer.
+"""Procedural cloth and garment meshes with warp-carrying UVs (written with :func:`kesbrdf.io.ply.write_ply`).
 
 Every mesh here is ``(positions (V,3), normals (V,3), uvs (V,2), faces (F,3))`` in a
 y-up world (metres), with **u along the warp** and v along the weft, oriented so that
@@ -13,9 +13,12 @@ import math
 
 import numpy as np
 
-from kesbrdf._atomic import atomic_path
+from kesbrdf.io.ply import vertex_normals, write_ply
 
-__all__ = ["write_ply", "grid_faces", "vertex_normals", "swatch", "folded_cloth", "skirt", "ellipsoid", "rotate_uv", "procedural_drape"]
+#: Normal of vertices without a defined one: the render scenes are y-up.
+UP = (0.0, 1.0, 0.0)
+
+__all__ = ["grid_faces", "swatch", "folded_cloth", "skirt", "ellipsoid", "rotate_uv", "procedural_drape"]
 
 
 def grid_faces(n_rows: int, n_cols: int) -> np.ndarray:
@@ -26,17 +29,6 @@ def grid_faces(n_rows: int, n_cols: int) -> np.ndarray:
     c = a + n_cols
     d = c + 1
     return np.concatenate([np.stack([a, c, b], -1), np.stack([b, c, d], -1)]).astype(np.uint32)
-
-
-def vertex_normals(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted vertex normals (unit; zero-area vertices get +y)."""
-    p = positions[faces]
-    n_face = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
-    n = np.zeros_like(positions)
-    for k in range(3):
-        np.add.at(n, faces[:, k], n_face)
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
-    return np.where(length > 0, n / np.where(length > 0, length, 1), [0.0, 1.0, 0.0])
 
 
 def rotate_uv(uv: np.ndarray, degrees: float) -> np.ndarray:
@@ -53,7 +45,7 @@ def _grid_mesh(pos_fn, n_u: int, n_v: int):
     positions = pos_fn(u, v).reshape(-1, 3)
     uv = np.stack([u, v], -1).reshape(-1, 2)
     faces = grid_faces(n_u, n_v)
-    return positions, vertex_normals(positions, faces), uv, faces
+    return positions, vertex_normals(positions, faces, fallback=UP), uv, faces
 
 
 def swatch(size: float = 1.0, bend: float = 0.0, n: int = 33):
@@ -125,32 +117,6 @@ def ellipsoid(center=(0.0, 0.0, 0.0), radii=(1.0, 1.0, 1.0), n_u: int = 24, n_v:
     return p, n / np.linalg.norm(n, axis=-1, keepdims=True), uv, f
 
 
-def write_ply(path, positions, normals=None, uvs=None, faces=None) -> None:
-    """Write a binary little-endian PLY (x y z [nx ny nz] [u v], triangles), atomically."""
-    positions = np.asarray(positions, np.float32)
-    cols = [positions]
-    props = ["x", "y", "z"]
-    if normals is not None:
-        cols.append(np.asarray(normals, np.float32))
-        props += ["nx", "ny", "nz"]
-    if uvs is not None:
-        cols.append(np.asarray(uvs, np.float32))
-        props += ["u", "v"]
-    vert = np.ascontiguousarray(np.concatenate(cols, axis=1), "<f4")
-    faces = np.asarray(faces, np.uint32)
-    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(positions)}"]
-    header += [f"property float {p}" for p in props]
-    header += [f"element face {len(faces)}", "property list uchar uint vertex_indices", "end_header"]
-    face_rec = np.zeros(len(faces), dtype=[("n", "u1"), ("idx", "<u4", (3,))])
-    face_rec["n"] = 3
-    face_rec["idx"] = faces
-    with atomic_path(path) as tmp:
-        with open(tmp, "wb") as fh:
-            fh.write(("\n".join(header) + "\n").encode("ascii"))
-            fh.write(vert.tobytes())
-            fh.write(face_rec.tobytes())
-
-
 def procedural_drape(folder, frames: int = 24, fps: float = 24.0, n: int = 49):
     """Write a drape folder (``kesbrdf drape`` format) of a sheet settling into folds.
 
@@ -173,7 +139,7 @@ def procedural_drape(folder, frames: int = 24, fps: float = 24.0, n: int = 49):
         p = p * [1.0, ease, 1.0] + [0.0, 0.6 * (1 - ease), 0.0]
         zup = np.stack([p[:, 0], -p[:, 2], p[:, 1]], -1)  # y-up -> z-up
         name = f"frame_{k:04d}.ply"
-        write_ply(folder / name, zup, vertex_normals(zup, f), uv, f)
+        write_ply(folder / name, zup, f, vertex_normals(zup, f), uv)
         names.append(name)
     meta = {"fps": fps, "frames": names, "colliders": [], "scene": "sphere", "up_axis": "z",
             "generator": "kesbrdf.render.mesh.procedural_drape"}

@@ -35,7 +35,8 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-from kesbrdf.errors import FormatError, KesbrdfError, where
+from kesbrdf.errors import FormatError, KesbrdfError, validate_choice, where
+from kesbrdf.io.ply import write_ply
 from kesbrdf.render import mesh as _mesh
 
 __all__ = [
@@ -56,6 +57,8 @@ __all__ = [
 SCENES = ("sphere", "swatch", "drape", "dressform")
 ENVIRONMENTS = ("studio", "sky", "uniform", "none")
 LIGHTS = ("area", "sun", "none")
+#: Largest image accepted (pixels): 8K UHD.  Bigger requests are a typo, not a render.
+MAX_PIXELS = 7680 * 4320
 #: Diffuse albedo of floors and dress forms.
 PROP_ALBEDO = (0.42, 0.42, 0.42)
 #: Vertical field of view of the camera, degrees.
@@ -83,13 +86,19 @@ class RenderOptions:
     integrator: dict | None = field(default=None, repr=False)
 
     def validate(self) -> "RenderOptions":
-        if self.env not in ENVIRONMENTS:
-            raise KesbrdfError(f"unknown environment {self.env!r}; expected one of {', '.join(ENVIRONMENTS)}")
-        if self.light not in LIGHTS:
-            raise KesbrdfError(f"unknown light {self.light!r}; expected one of {', '.join(LIGHTS)}")
+        validate_choice("environment", self.env, ENVIRONMENTS)
+        validate_choice("light", self.light, LIGHTS)
         w, h = self.resolution
         if not (int(w) > 0 and int(h) > 0 and int(self.spp) > 0):
             raise KesbrdfError(f"expected positive resolution and spp, got {w}x{h} and {self.spp}")
+        if int(w) * int(h) > MAX_PIXELS:
+            raise KesbrdfError(f"resolution: expected at most {MAX_PIXELS} pixels, got {w}x{h}")
+        if not 1 <= int(self.max_depth) <= 1024:
+            raise KesbrdfError(f"max_depth: expected a path length in [1, 1024], got {self.max_depth}")
+        if int(self.seed) < 0:
+            raise KesbrdfError(f"seed: expected an integer >= 0, got {self.seed}")
+        if not math.isfinite(float(self.exposure)):
+            raise KesbrdfError(f"exposure: expected a finite number of stops, got {self.exposure}")
         return self
 
     def to_json(self) -> dict:
@@ -132,8 +141,7 @@ def read_drape(path) -> Drape:
         name = c.get("file") if isinstance(c, dict) else c
         colliders.append(root / str(name))
     up = str(meta.get("up_axis") or _guess_up_axis(frames[0], frames[-1])).lower()
-    if up not in ("y", "z"):
-        raise FormatError(f"{where(meta_path)}expected up_axis 'y' or 'z', got {up!r}")
+    validate_choice("up_axis", up, ("y", "z"), meta_path, error=FormatError)
     return Drape(root, float(meta.get("fps", 24.0)), frames, colliders, str(meta.get("scene", "sphere")), up)
 
 
@@ -256,7 +264,8 @@ def _ply_shape(path, bsdf: dict, up_axis: str = "y") -> "mi.Shape":
 
 def _mesh_shape(workdir: Path, name: str, mesh, bsdf: dict) -> "mi.Shape":
     path = workdir / f"{name}.ply"
-    _mesh.write_ply(path, *mesh)
+    positions, normals, uvs, faces = mesh
+    write_ply(path, positions, faces, normals, uvs)
     return _ply_shape(path, bsdf)
 
 
@@ -303,8 +312,7 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
     framing : (center, radius), optional
         Fix the camera (animations keep one framing for every frame).
     """
-    if scene not in SCENES:
-        raise KesbrdfError(f"unknown scene {scene!r}; expected one of {', '.join(SCENES)}")
+    validate_choice("scene", scene, SCENES)
     opts.validate()
     if cloth_bsdf is None:
         from kesbrdf.render.bsdf import check_model

@@ -16,7 +16,16 @@ default and serves
 
 Errors come back as ``{"error": "<one line>"}`` with a 4xx status (the same message
 the CLI prints for the same input); the server keeps running.  Request bodies larger
-than ``max_upload_bytes`` are refused with 413 before they are read.  Only files
+than ``max_upload_bytes`` are refused with 413 before they are read.
+
+Limits (``docs/formats.md``, "Viewer server limits"): a connection that sends nothing for
+:data:`REQUEST_TIMEOUT_S` seconds is closed (408 if a body was pending); at most
+:data:`MAX_CONNECTIONS` connections are served at once; an upload may have at most
+:data:`MAX_FIT_CHANNELS` channels and :data:`MAX_FIT_VALUES` values (413 otherwise,
+checked before fitting); a fitted answer larger than :data:`MAX_RESPONSE_BYTES` is
+refused with 413; fitted uploads are kept in a cache of at most
+:data:`MAX_UPLOADS_KEPT` entries and :data:`MAX_UPLOAD_CACHE_BYTES` bytes (oldest
+dropped first; the model given on the command line is kept).  Only files
 inside the static folder and the model files listed by ``/api/models`` are
 reachable: every static path is resolved (symlinks included) and must stay inside
 the static folder; models are addressed by id, never by path.
@@ -36,7 +45,7 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 from kesbrdf._version import __version__
-from kesbrdf.errors import KesbrdfError, ModelError, where
+from kesbrdf.errors import KesbrdfError, ModelError, where, validate_choice
 
 __all__ = [
     "DEFAULT_MAX_UPLOAD_BYTES",
@@ -49,11 +58,40 @@ __all__ = [
     "fit_csv_bytes",
     "find_input_measurement",
     "measurement_to_json",
+    "check_upload_work",
+    "UploadTooLarge",
+    "REQUEST_TIMEOUT_S",
+    "MAX_CONNECTIONS",
+    "MAX_FIT_CHANNELS",
+    "MAX_FIT_VALUES",
+    "MAX_RESPONSE_BYTES",
+    "MAX_UPLOADS_KEPT",
+    "MAX_UPLOAD_CACHE_BYTES",
 ]
 
 #: Default upload limit: a dense 3° gonio CSV of four orientations is ~10 kB, a
 #: hemispherical RGB scan a few MB.
 DEFAULT_MAX_UPLOAD_BYTES = 5 * 1024 * 1024
+
+#: Seconds a connection may stay silent (request line, headers, body, keep-alive idle).
+REQUEST_TIMEOUT_S = 30.0
+
+#: Connections served at once; more are closed at accept.
+MAX_CONNECTIONS = 32
+
+#: Channels one upload may have: the fit's time and memory grow with channels x grid
+#: (a 300-channel upload took 35 s and 1.5 GB); 32 covers 400-700 nm at 10 nm.
+MAX_FIT_CHANNELS = 32
+
+#: Rows x channels one upload may have.
+MAX_FIT_VALUES = 2_000_000
+
+#: Largest JSON answer to one fit (model + measurement), bytes.
+MAX_RESPONSE_BYTES = 32 * 1024 * 1024
+
+#: Fitted uploads kept in memory (oldest dropped first) and their total JSON size.
+MAX_UPLOADS_KEPT = 8
+MAX_UPLOAD_CACHE_BYTES = 64 * 1024 * 1024
 
 #: The built bundle shipped inside the package (``make viewer-bundle``).
 STATIC_DIR = Path(__file__).resolve().parent / "static"
@@ -88,9 +126,19 @@ def load_model_json(path: str | os.PathLike) -> dict:
         Not JSON, not a kesbrdf model, or an unknown format version.
     """
     path = Path(path)
-    text = path.read_text(encoding="utf-8")
+    try:
+        from kesbrdf import model as model_module
+    except ImportError:  # core model module not available: the format check below stands
+        model_module = None
+    if model_module is not None and hasattr(model_module, "load"):
+        model_module.load(path)  # first, so that the error is the CLI's for the same file
+    from kesbrdf.io.text import decode_text
+
+    text = decode_text(path.read_bytes(), path)
     try:
         doc = json.loads(text)
+    except RecursionError:
+        raise ModelError(f"{where(path)}expected a kesbrdf model (JSON), got JSON nested too deeply") from None
     except json.JSONDecodeError as exc:
         raise ModelError(
             f"{where(path, exc.lineno)}expected a kesbrdf model (JSON), got invalid JSON: {exc.msg}"
@@ -101,12 +149,6 @@ def load_model_json(path: str | os.PathLike) -> dict:
         raise ModelError(
             f"{where(path)}expected model format_version 1, got {doc.get('format_version')!r}"
         )
-    try:
-        from kesbrdf import model as model_module
-    except ImportError:  # core model module not available: the format check above stands
-        model_module = None
-    if model_module is not None and hasattr(model_module, "load"):
-        model_module.load(path)
     return doc
 
 
@@ -209,6 +251,40 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
     return model_doc, measurement_to_json(measurement)
 
 
+class UploadTooLarge(KesbrdfError):
+    """An upload would cost more work or memory than the server allows (HTTP 413)."""
+
+
+def check_upload_work(data: bytes, name: str = "upload.csv") -> None:
+    """Refuse an upload whose fit would be too costly, before fitting it.
+
+    Parses the CSV (the reader's errors, named ``name:line``, come out unchanged) and
+    checks channels and values against :data:`MAX_FIT_CHANNELS` and :data:`MAX_FIT_VALUES`.
+
+    Raises
+    ------
+    UploadTooLarge
+        Too many channels or values.
+    KesbrdfError
+        The CSV is malformed (same message as ``kesbrdf fit name``).
+    """
+    from kesbrdf.io.measurement_csv import parse_measurement
+    from kesbrdf.io.text import decode_text
+
+    measurement = parse_measurement(decode_text(data, name), source=name)
+    n_channels = len(measurement.channels)
+    if n_channels > MAX_FIT_CHANNELS:
+        raise UploadTooLarge(
+            f"{name}: expected at most {MAX_FIT_CHANNELS} channels for a fit in the viewer, got {n_channels}; "
+            "fit it with 'kesbrdf fit' and open the model file"
+        )
+    values = len(measurement) * n_channels
+    if values > MAX_FIT_VALUES:
+        raise UploadTooLarge(
+            f"{name}: expected at most {MAX_FIT_VALUES} values (rows x channels) for a fit in the viewer, got {values}"
+        )
+
+
 @dataclass
 class ModelEntry:
     """One model the server can hand out: from a file or from an upload."""
@@ -233,7 +309,11 @@ class ModelStore:
     model_files: list[Path] = field(default_factory=list)
     entries: dict[str, ModelEntry] = field(default_factory=dict)
     lock: threading.Lock = field(default_factory=threading.Lock)
+    max_uploads: int = MAX_UPLOADS_KEPT
+    max_upload_bytes: int = MAX_UPLOAD_CACHE_BYTES
     _uploads: int = 0
+    _upload_sizes: dict = field(default_factory=dict)  # id -> JSON bytes, oldest first
+    _pinned: set = field(default_factory=set)
 
     def scan(self) -> list[ModelEntry]:
         """Refresh file entries from ``model_files`` and ``*.kes.json`` in ``model_dirs``."""
@@ -255,13 +335,43 @@ class ModelStore:
                     self.entries[entry_id] = ModelEntry(entry_id, p.name, "file", path=p)
             return list(self.entries.values())
 
-    def add_upload(self, name: str, model: dict, measurement: dict | None) -> ModelEntry:
+    def add_upload(
+        self, name: str, model: dict, measurement: dict | None, size: int | None = None, pinned: bool = False
+    ) -> ModelEntry:
+        """Keep a fitted upload; drop the oldest unpinned ones beyond the count and size limits.
+
+        ``size`` is the entry's JSON size in bytes (computed when not given).
+        """
+        if size is None:
+            size = len(json.dumps(model)) + len(json.dumps(measurement))
         with self.lock:
             self._uploads += 1
             entry_id = f"u{self._uploads}"
             entry = ModelEntry(entry_id, name, "upload", model=model, measurement=measurement)
             self.entries[entry_id] = entry
+            self._upload_sizes[entry_id] = int(size)
+            if pinned:
+                self._pinned.add(entry_id)
+            self._evict()
             return entry
+
+    def _evict(self) -> None:
+        """Drop the oldest unpinned uploads until the cache is within its limits (lock held)."""
+        for old in list(self._upload_sizes):
+            count = len(self._upload_sizes)
+            total = sum(self._upload_sizes.values())
+            if count <= self.max_uploads and total <= self.max_upload_bytes:
+                return
+            if old in self._pinned or old == next(reversed(self._upload_sizes)):
+                continue  # the pinned upload and the newest one stay
+            del self._upload_sizes[old]
+            self.entries.pop(old, None)
+
+    @property
+    def upload_cache(self) -> tuple[int, int]:
+        """(uploads kept, their total JSON bytes)."""
+        with self.lock:
+            return len(self._upload_sizes), sum(self._upload_sizes.values())
 
     def get(self, entry_id: str) -> ModelEntry | None:
         with self.lock:
@@ -273,6 +383,8 @@ class _Handler(BaseHTTPRequestHandler):
     server: "ViewerServer"
     server_version = f"kesbrdf-view/{__version__}"
     protocol_version = "HTTP/1.1"
+    #: socket timeout (StreamRequestHandler applies it): half-open requests do not stay open
+    timeout = REQUEST_TIMEOUT_S
 
     def log_message(self, format, *args):  # noqa: A002 - signature from the base class
         if self.server.verbose:
@@ -364,6 +476,8 @@ class _Handler(BaseHTTPRequestHandler):
             except (KesbrdfError, OSError) as exc:
                 msg = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) else str(exc)
                 return self._error(422, msg)
+            except Exception as exc:  # a loader bug must not look like a server crash: still the file's fault
+                return self._error(422, f"{where(entry.path)}cannot load model file: {type(exc).__name__}: {exc}")
             measurement = entry.measurement or find_input_measurement(entry.path, model)
         else:
             model, measurement = entry.model, entry.measurement
@@ -389,18 +503,37 @@ class _Handler(BaseHTTPRequestHandler):
             return self._error(
                 413, f"upload too large: {length} bytes, limit {limit} bytes", close=True
             )
-        data = self.rfile.read(length)
+        try:
+            data = self.rfile.read(length)
+        except TimeoutError:
+            return self._error(408, f"upload incomplete after {self.timeout:g} s; expected {length} bytes", close=True)
+        if len(data) != length:
+            return self._error(400, f"upload incomplete: expected {length} bytes, got {len(data)}", close=True)
         name = _safe_upload_name((query.get("name") or ["upload.csv"])[0])
         fallback = (query.get("fallback") or [None])[0]
-        if fallback not in (None, "error", "log"):
-            return self._error(400, f"expected fallback 'error' or 'log', got {fallback!r}")
+        try:
+            if fallback is not None:
+                validate_choice("fallback", fallback, ("error", "log"))
+        except KesbrdfError as exc:
+            return self._error(400, str(exc))
+        try:
+            check_upload_work(data, name)
+        except UploadTooLarge as exc:
+            return self._error(413, str(exc))
+        except KesbrdfError as exc:
+            return self._error(400, str(exc))
         try:
             model, measurement = fit_csv_bytes(data, name, fallback)
         except KesbrdfError as exc:
             return self._error(400, str(exc))
         except UnicodeDecodeError as exc:
             return self._error(400, f"{name}: expected UTF-8 text, got undecodable bytes ({exc.reason})")
-        entry = self.server.store.add_upload(name, model, measurement)
+        size = len(json.dumps(model)) + len(json.dumps(measurement))
+        if size > MAX_RESPONSE_BYTES:
+            return self._error(
+                413, f"{name}: the fitted model would be {size} bytes of JSON, limit {MAX_RESPONSE_BYTES} bytes"
+            )
+        entry = self.server.store.add_upload(name, model, measurement, size=size)
         return self._json(
             200, {"id": entry.id, "name": entry.name, "model": model, "measurement": measurement}
         )
@@ -427,6 +560,7 @@ class ViewerServer(ThreadingHTTPServer):
 
     daemon_threads = True
     allow_reuse_address = True
+    max_connections = MAX_CONNECTIONS
 
     def __init__(
         self,
@@ -445,6 +579,24 @@ class ViewerServer(ThreadingHTTPServer):
         self.verbose = verbose
         host = str(self.server_address[0])
         self.loopback = host.startswith("127.") or host in ("::1", "localhost")
+        self._active = threading.BoundedSemaphore(self.max_connections)
+
+    def process_request(self, request, client_address):
+        """Serve in a thread, or close at once when :data:`MAX_CONNECTIONS` are open."""
+        if not self._active.acquire(blocking=False):
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._active.release()
+            raise
+
+    def process_request_thread(self, request, client_address):
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._active.release()
 
     @property
     def url(self) -> str:
@@ -517,7 +669,7 @@ def make_server(
         entries[0].measurement = measurement_to_json(read_measurement(measurement))
     initial = None
     if initial_upload is not None:
-        initial = store.add_upload(*initial_upload).id
+        initial = store.add_upload(*initial_upload, pinned=True).id
     elif model_files:
         initial = entries[0].id
     elif entries:

@@ -4,6 +4,8 @@ import json
 
 import pytest
 
+pytest.importorskip("matplotlib")  # an optional extra (kesbrdf[plot])
+
 from kesbrdf.cli.main import main
 from kesbrdf.plotting.save import read_png_text
 

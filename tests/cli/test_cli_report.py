@@ -4,6 +4,8 @@ import re
 
 import pytest
 
+pytest.importorskip("matplotlib")  # an optional extra (kesbrdf[plot])
+
 from kesbrdf.cli.main import main
 
 EXIT_USER_ERROR = 2

@@ -1,9 +1,9 @@
-"""kesbrdf.cloth.ply: binary PLY in Mitsuba's layout, round trip and errors."""
+"""kesbrdf.io.ply: binary PLY in Mitsuba's layout, round trip and errors."""
 
 import numpy as np
 import pytest
 
-from kesbrdf.cloth.ply import read_ply, vertex_normals, write_ply
+from kesbrdf.io.ply import read_ply, vertex_normals, write_ply
 from kesbrdf.errors import FormatError
 
 
@@ -57,3 +57,10 @@ def test_bad_inputs_raise(tmp_path):
     with pytest.raises(FormatError, match="truncated"):
         read_ply(trunc)
     assert not list(tmp_path.glob("*.part"))  # atomic writes leave no temporaries
+
+
+def test_vertex_normals_fallback_is_the_given_up_axis():
+    # vertex 3 is in no face: it takes the fallback (z-up cloth by default, y-up for render scenes)
+    p = [[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5]]
+    assert vertex_normals(p, [[0, 1, 2]])[3].tolist() == [0.0, 0.0, 1.0]
+    assert vertex_normals(p, [[0, 1, 2]], fallback=(0, 1, 0))[3].tolist() == [0.0, 1.0, 0.0]

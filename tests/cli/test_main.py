@@ -85,7 +85,7 @@ def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys)
 
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
 
-    allm = read_measurement(Path(__file__).parent / "data" / "curet_fabrics.csv")
+    allm = read_measurement(Path(__file__).parents[1] / "data" / "curet_fabrics.csv")
     k = [i for i, c in enumerate(allm.channels) if "corduroy" in c][0]
     one = allm.subset(np.ones(len(allm), bool))
     one.values = allm.values[:, [k]]
