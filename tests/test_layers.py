@@ -36,7 +36,7 @@ LAYERS = [
     ("io", ["kesbrdf.io", "kesbrdf.kinds", "kesbrdf.references", "kesbrdf.gonio", "kesbrdf.acquisition",
             "kesbrdf.demo_data"]),
     ("kes", ["kesbrdf.kes"]),
-    ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior"]),
+    ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior", "kesbrdf.prior_model"]),
     ("brdf", ["kesbrdf.brdf", "kesbrdf.fitting", "kesbrdf"]),
     ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare"]),
     ("apps", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.cli", "kesbrdf.viewer", "kesbrdf.cloth",

@@ -197,7 +197,7 @@ def _check_options(name, cls, options, strict) -> None:
     for other in known_fitters():
         try:
             other_options = fitter_class(other).fit_options
-        except Exception:  # a fitter whose optional dependency is missing
+        except ImportError:  # a fitter whose optional dependency is missing
             continue
         for opt in unknown:
             if opt in other_options:

@@ -118,6 +118,8 @@ HOSTILE = {
     "float shape": (mutated(arrays__table=table_entry([2.5, 3])), "non-negative integers"),
     "bool shape": (mutated(arrays__table=table_entry([True, 3])), "non-negative integers"),
     "huge shape": (mutated(arrays__table=table_entry([2**32, 2**32])), f"at most {MAX_ARRAY_ELEMENTS} elements"),
+    # found by the fuzz profile: an empty array whose other extents overflow numpy
+    "empty huge shape": (mutated(arrays__body=table_entry([0, 2**31, 2**31])), f"at most {MAX_ARRAY_ELEMENTS} elements"),
     "shape not a list": (mutated(arrays__table=table_entry("Infinity")), "non-negative integers"),
     "short data": (mutated(arrays__body=table_entry([1], "AAAA")), "expected 8 bytes"),
     "bad dtype": (mutated(arrays__body={"dtype": "|O", "shape": [1], "data": "AAAAAAAAAAA="}), "dtype one of"),

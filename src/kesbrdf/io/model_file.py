@@ -79,7 +79,9 @@ def decode_array(obj, name: str = "array", source=None) -> np.ndarray:
     if not isinstance(shape, list) or len(shape) > 8 or not all(_is_int(s) and s >= 0 for s in shape):
         raise ModelError(f"{prefix}expected shape a list of at most 8 non-negative integers, got {str(shape)[:60]}")
     count = math.prod(shape)
-    if count > MAX_ARRAY_ELEMENTS:
+    # zero-length dimensions do not excuse the others: numpy refuses shapes whose
+    # non-zero extents overflow, even for an empty array
+    if math.prod(max(s, 1) for s in shape) > MAX_ARRAY_ELEMENTS:
         raise ModelError(f"{prefix}expected at most {MAX_ARRAY_ELEMENTS} elements, got shape {shape}")
     if not isinstance(data, str):
         raise ModelError(f"{prefix}expected base64 text data, got {type(data).__name__}")

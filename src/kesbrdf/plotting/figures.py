@@ -558,7 +558,7 @@ def measured_in_plane(measurement, channel=None, paper_line: str | bool = "auto"
     return {"psi_deg": groups * PSI_TOL_DEG, "gamma_deg": G, "q": Q, "label": label}
 
 
-def model_in_plane(model, psi, gamma, mapping: str = "deviation") -> np.ndarray:
+def model_in_plane(model, psi, gamma, mapping: str | None = None) -> np.ndarray:
     """The model's q at the paper's in-plane geometry for orientation ψ and signed γ.
 
     θ_i = π/4 − γ/2, θ_r = π/4 + γ/2, light at azimuth ψ + π, viewer at ψ
@@ -771,7 +771,7 @@ def _measured_at_gamma(measured: dict, gamma_deg: float):
 
 
 def figure_4(model=None, measurement=None, reference=None, *, gamma_deg=(-60.0, 0.0), channel=None,
-             mapping="deviation", n_phi: int = 360, figsize=None):
+             mapping=None, n_phi: int = 360, figsize=None):
     """Paper Fig. 4: polar plots of q over the orientation at chosen signed γ.
 
     The KES curve is the model at the in-plane geometry of orientation ψ ∈ [0, 2π)
@@ -888,7 +888,7 @@ def measured_at_light(measurement, theta_i, phi_i, tol=np.radians(LIGHT_TOL_DEG)
 
 
 def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0, 90.0), (30.0, 45.0)),
-             mapping="deviation", channel=None, n: int = 121, projection: str = "equal-area",
+             mapping=None, channel=None, n: int = 121, projection: str = "equal-area",
              difference: str = "log", scale: str = "log", figsize=None):
     """Paper Fig. 6: hemispherical maps of f_r over the viewing hemisphere for fixed lights.
 
@@ -923,6 +923,8 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
         ``fig.kesbrdf_maps`` holds, per light, the arrays drawn: ``model``,
         ``reference``, ``difference`` (n, n) and ``measured`` (u, v, f_r, model) or None.
     """
+    if model is not None:
+        mapping = model.check_mapping(mapping)  # None: the kind's own (deviation for kes)
     from kesbrdf import brdf
     from kesbrdf.geometry import spherical_to_cartesian
 
@@ -1080,6 +1082,6 @@ def make_figure(name: str, model=None, measurement=None, reference=None, **kwarg
         from kesbrdf.kinds import require_kind
 
         require_kind(model, FIGURE_KINDS[name], f"figure {name}")
-        if "mapping" in kwargs:
-            kwargs["mapping"] = model.check_mapping(kwargs["mapping"])
+        if name in ("3a", "3b", "4", "6"):  # the figures that evaluate the model
+            kwargs["mapping"] = model.check_mapping(kwargs.get("mapping"))
     return builders[name](model=model, measurement=measurement, reference=reference, **kwargs)
