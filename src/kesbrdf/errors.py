@@ -14,6 +14,7 @@ __all__ = [
     "MeasurementError",
     "KESError",
     "ModelError",
+    "ExportError",
     "where",
 ]
 
@@ -45,3 +46,7 @@ class KESError(KesbrdfError):
 
 class ModelError(KesbrdfError):
     """A model file is unreadable, of an unknown version, or inconsistent."""
+
+
+class ExportError(KesbrdfError):
+    """An export cannot be written as asked (format, output path, options, model kind)."""
