@@ -13,4 +13,7 @@ from kesbrdf.export._framework import ExportResult, export, format_module, forma
 __all__ = ["FORMATS", "ExportResult", "export", "format_module", "format_names"]
 
 #: format name -> module (imported on use, so each format's dependencies stay optional)
-FORMATS: dict[str, str] = {}
+FORMATS: dict[str, str] = {
+    "rgl-bsdf": "rgl_bsdf",
+    "rgl-bsdf-spectral": "rgl_bsdf_spectral",
+}
