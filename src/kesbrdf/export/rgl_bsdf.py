@@ -105,7 +105,7 @@ def _ndf_sigma(f, n_ndf: int, floor: float):
     d = np.maximum(back, 0.0) * m[:, 2] ** 2
     d = d.reshape(n_ndf, n_ndf)
     # quadrature of the bilinear interpolant in u-space: dω = 2π² u_θ sin θ du_θ du_φ
-    k = 4 * n_ndf
+    k = 2 * n_ndf
     uq = (np.arange(k) + 0.5) / k
     qx, qy = np.meshgrid(uq, uq)
     q = np.stack([qx.ravel(), qy.ravel()], axis=-1)
@@ -124,7 +124,7 @@ def _ndf_sigma(f, n_ndf: int, floor: float):
     d /= cos_integral(d)
     dq = Marginal2D(d, normalize=False, sampling=False).eval(q) * wq
     # σ at the grid nodes: ∫ D(m) <ω, m>+ dm
-    sigma = np.maximum(m @ mq.T, 0.0) @ dq
+    sigma = np.concatenate([np.maximum(m[a : a + 256] @ mq.T, 0.0) @ dq for a in range(0, m.shape[0], 256)])
     return d, sigma.reshape(n_ndf, n_ndf)
 
 
