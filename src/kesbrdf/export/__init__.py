@@ -16,4 +16,5 @@ __all__ = ["FORMATS", "ExportResult", "export", "format_module", "format_names"]
 FORMATS: dict[str, str] = {
     "rgl-bsdf": "rgl_bsdf",
     "rgl-bsdf-spectral": "rgl_bsdf_spectral",
+    "mitsuba-scene": "mitsuba_scene",
 }
