@@ -19,16 +19,15 @@ import numpy as np
 
 #: (name, options) of the grids compared; the default is DEFAULTS of kesbrdf.export.rgl_bsdf
 GRIDS = [
-    ("9x17x24_ndf32", dict(n_theta_i=9, n_phi_i=17, n=24, n_ndf=32)),
-    ("9x17x32", dict(n_theta_i=9, n_phi_i=17, n=32)),
-    ("17x17x32", dict(n_theta_i=17, n_phi_i=17, n=32)),
-    ("17x33x32_default", dict()),
-    ("17x33x32_ndf32", dict(n_ndf=32)),
-    ("17x33x32_floor0.01", dict(floor=0.01)),
-    ("17x33x32_floor0.2", dict(floor=0.2)),
-    ("17x33x48", dict(n=48)),
-    ("25x33x32", dict(n_theta_i=25)),
-    ("25x49x32", dict(n_theta_i=25, n_phi_i=49)),
+    ("9x17x24_ndf32_floor0.05", dict(n_theta_i=9, n_phi_i=17, n=24, n_ndf=32, floor=0.05)),
+    ("17x17x32_ndf64_floor0.05", dict(n_phi_i=17, n=32, n_ndf=64, floor=0.05)),
+    ("17x33x32_ndf64_floor0.05", dict(n=32, n_ndf=64, floor=0.05)),
+    ("17x33x32_ndf64_floor0.01", dict(n=32, n_ndf=64, floor=0.01)),
+    ("17x33x32_ndf32_floor0.2", dict(n=32)),
+    ("17x33x48_ndf32_floor0.2_default", dict()),
+    ("25x33x48_ndf32_floor0.2", dict(n_theta_i=25)),
+    ("17x49x48_ndf32_floor0.2", dict(n_phi_i=49)),
+    ("17x33x64_ndf32_floor0.2", dict(n=64)),
 ]
 N_PAIRS = 20000
 MIN_COS = 0.1

@@ -21,7 +21,7 @@ GRID = dict(n_theta_i=9, n_phi_i=17, n=24, n_ndf=32)
 #: Random pairs, both cos θ > MIN_COS (as in the research prototype).
 MIN_COS = 0.2
 N_PAIRS = 4000
-#: Measured at GRID on this model (bench_export, 20k pairs): median 1.8 %, p90 8.9 %.
+#: Measured at GRID on this model (4000 pairs, this seed): median 1.6 %, p90 8.0 %.
 #: The bounds leave ~60 % margin for the seed; a wrong frame, a misplaced cosine or a
 #: reader/writer warp mismatch gives errors of 30 % and more.
 MEDIAN_BOUND = 0.03
@@ -32,10 +32,12 @@ NODE_MEDIAN_BOUND = 0.01
 EXACT_BOUND = 2e-3
 #: Render comparison: relative RMSE of the linear images and mean FLIP (HDR).  Noise-free
 #: setup (directional light, direct lighting, same pixel samples), so the difference is the
-#: export's interpolation error.  Measured: RMSE 0.3 %, FLIP 0.011 (two seeds of the
+#: export's interpolation error.  Measured: RMSE 0.28 %, FLIP 0.009 (two seeds of the
 #: plugin alone: FLIP 0.010); the same file with φ_i turned by 90° (a frame error):
 #: RMSE 8.4 %, FLIP 0.16.
 RENDER_RMSE_BOUND = 0.02
+#: Mean sampling weight of ``measured.sample`` vs the model's directional albedo.
+SAMPLING_BOUND = 0.01
 FLIP_BOUND = 0.05
 
 
@@ -177,7 +179,7 @@ def test_mitsuba_sampling_weights_match_the_albedo(model, plugin):
     T, P = np.meshgrid(th, ph, indexing="ij")
     wl = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
     wq = ((w * np.pi / 4 * np.sin(th) * np.cos(th))[:, None] * np.full(128, 2 * np.pi / 128)).ravel()
-    for theta_deg in (20.0, 45.0):
+    for theta_deg in (20.0, 45.0, 70.0):
         t = np.radians(theta_deg)
         wv = np.array([np.sin(t) * np.cos(0.7), np.sin(t) * np.sin(0.7), np.cos(t)])
         albedo = _lum(np.einsum("n,nc->c", wq, evaluate(model, wl, wv[None, :], "deviation")))
@@ -189,8 +191,10 @@ def test_mitsuba_sampling_weights_match_the_albedo(model, plugin):
             sampler.seed(3, n)
             _, weight = plugin.sample(mi.BSDFContext(), si, sampler.next_1d(), sampler.next_2d())
             mean = _lum(np.array(weight, float).T).mean()
-        # measured at GRID: within 2 % of the quadrature; 1/sqrt(n) noise is ~0.5 %
-        assert mean == pytest.approx(albedo, rel=0.05), (theta_deg, mean, albedo)
+        # measured at GRID (2^18 samples): -0.06 %, -0.04 %, -0.18 % at 20°, 45°, 70°, with
+        # standard errors of 0.01-0.02 % (the luminance warp makes the weights nearly
+        # constant); a wrong vndf or luminance field biases the mean by far more than 1 %
+        assert mean == pytest.approx(albedo, rel=SAMPLING_BOUND), (theta_deg, mean, albedo)
 
 
 def test_render_matches_plugin(model, exported, tmp_path):
