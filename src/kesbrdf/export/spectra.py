@@ -71,33 +71,25 @@ def _rgb_operator(lam_nodes) -> np.ndarray:
 FLATNESS_WEIGHT = 10.0
 
 
+#: weight of the RGB equality rows in the penalised least squares (equality to ~1e-7)
+EQUALITY_WEIGHT = 1e5
+
+
 @functools.lru_cache(maxsize=8)
 def _basis(lam_key: tuple) -> np.ndarray:
-    from scipy.optimize import minimize
+    """Solve the constrained problem of the module docstring as bounded least squares
+    (scipy ``lsq_linear``), the equalities as heavily weighted rows."""
+    from scipy.optimize import lsq_linear
 
     lam = np.array(lam_key)
     L = lam.size
     A = _rgb_operator(lam)
     D = np.diff(np.eye(L), 2, axis=0)
-    Q = D.T @ D
-    e = np.eye(3)
-    ones = np.ones(L)
-
-    def objective(x):
-        b = x.reshape(3, L)
-        r = b.sum(axis=0) - ones
-        return float(np.einsum("ci,ij,cj->", b, Q, b) + FLATNESS_WEIGHT * r @ r)
-
-    def grad(x):
-        b = x.reshape(3, L)
-        r = b.sum(axis=0) - ones
-        return (2 * b @ Q + 2 * FLATNESS_WEIGHT * r[None, :]).ravel()
-
-    cons = [{"type": "eq", "fun": lambda x: (x.reshape(3, L) @ A.T - e).ravel(),
-             "jac": lambda x: np.kron(np.eye(3), A)}]
-    x0 = np.full(3 * L, 1.0 / 3.0)
-    res = minimize(objective, x0, jac=grad, constraints=cons, bounds=[(0.0, None)] * (3 * L), method="SLSQP",
-                   options={"maxiter": 1000, "ftol": 1e-15})
+    eye3 = np.eye(3)
+    rows = [np.kron(eye3, D), np.sqrt(FLATNESS_WEIGHT) * np.kron(np.ones((1, 3)), np.eye(L)),
+            EQUALITY_WEIGHT * np.kron(eye3, A)]
+    rhs = [np.zeros(3 * (L - 2)), np.sqrt(FLATNESS_WEIGHT) * np.ones(L), EQUALITY_WEIGHT * eye3.ravel()]
+    res = lsq_linear(np.vstack(rows), np.concatenate(rhs), bounds=(0.0, np.inf), method="bvls", tol=1e-14)
     return np.maximum(res.x.reshape(3, L), 0.0)
 
 
