@@ -96,3 +96,29 @@ def test_cli_user_errors_exit_2_without_traceback(tmp_path, model, toy, capsys):
     assert err.count("\n") == 1 and "Traceback" not in err and "ending in .toy" in err
     assert main(["export", str(path), "--format", "toy", "-o", str(tmp_path / "m.toy"), "-O", "bad"]) == 2
     assert main(["export", str(tmp_path / "missing.kes.json"), "--format", "toy", "-o", str(tmp_path / "x.toy")]) == 2
+
+
+def test_cli_rgl_bsdf_reports_size_agreement_and_client(tmp_path, model, capsys):
+    path = tmp_path / "m.kes.json"
+    model.save(path)
+    out = tmp_path / "m.bsdf"
+    opts = ["-O", "n_theta_i=5", "-O", "n_phi_i=9", "-O", "n=16", "-O", "n_ndf=16"]
+    assert main(["export", str(path), "--format", "rgl-bsdf", "-o", str(out)] + opts) == 0
+    text = capsys.readouterr().out
+    assert f"wrote {out} (" in text and "KiB)" in text
+    assert "median_rel_err=" in text and "p90_rel_err_grazing=" in text
+    assert 'open with: Mitsuba 3 (RGB variants): <bsdf type="measured"><string name="filename" value="m.bsdf"/>' in text
+    assert out.read_bytes()[:12] == b"tensor_file\0"
+
+
+def test_cli_lists_the_formats(capsys):
+    assert main(["export", "--list"]) == 0
+    text = capsys.readouterr().out
+    for name in ("rgl-bsdf", "rgl-bsdf-spectral", "mitsuba-scene"):
+        assert name in text
+
+
+def test_bad_grid_option_is_a_one_line_error(tmp_path, model):
+    with pytest.raises(ExportError, match="option n_phi_i: expected an integer >= 3"):
+        export(model, "rgl-bsdf", tmp_path / "m.bsdf", n_phi_i=2)
+    assert not (tmp_path / "m.bsdf").exists()

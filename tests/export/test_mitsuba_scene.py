@@ -64,3 +64,19 @@ def test_unknown_option_fails_before_writing(tmp_path):
     with pytest.raises(ExportError, match="unknown option"):
         export(model, "mitsuba-scene", tmp_path / "x.xml", n_thetas=3)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_other_kinds_get_the_measured_scene(tmp_path):
+    from kesbrdf._drjit import import_mitsuba
+    from kesbrdf.export import export
+    from kesbrdf.gonio import measure
+    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.references.ward import AnisotropicWard
+
+    mi, _ = import_mitsuba("test")
+    model = fit_halfdiff(measure(AnisotropicWard(0.1, 0.3, rho_d=0.2, rho_s=0.1), protocol="dense", step_deg=10))
+    result = export(model, "mitsuba-scene", tmp_path / "hd.xml", n_theta_i=5, n_phi_i=9, n=16, n_ndf=16)
+    assert sorted(p.name for p in result.paths) == ["hd.bsdf", "hd.xml"]
+    assert 'type="measured"' in (tmp_path / "hd.xml").read_text()
+    img = np.array(mi.render(mi.load_file(str(tmp_path / "hd.xml"), spp=4, width=16, height=12)), float)
+    assert np.all(np.isfinite(img)) and img.mean() > 0.01

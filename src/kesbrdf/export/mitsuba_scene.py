@@ -19,6 +19,9 @@ r"""Format ``mitsuba-scene``: Mitsuba 3 XML scenes that render the model.
     nodes).  Runs in the ``mitsuba`` command-line renderer too:
     ``mitsuba -m scalar_rgb fabric_measured.xml``.
 
+Models of other kinds (``kes-halfdiff``, ...), which the plugin does not read, get only
+the ``measured`` scene, written as ``fabric.xml``.
+
 Filenames inside the scenes are relative to the XML file (Mitsuba resolves them from
 the scene's folder).  Resolution and sample count are scene defaults, overridable at
 load time (``mi.load_file(path, spp=256)``, ``mitsuba -Dspp=256``).
@@ -150,8 +153,7 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
     from kesbrdf._atomic import write_text
     from kesbrdf.errors import ExportError
 
-    if getattr(model, "kind", "kes") != "kes":
-        raise ExportError(f"mitsuba-scene: the kesbrdf plugin renders models of kind 'kes', got {model.kind!r}")
+    plugin = getattr(model, "kind", "kes") == "kes"  # what the kesbrdf plugin reads
     import inspect
 
     from kesbrdf.export import rgl_bsdf
@@ -163,20 +165,27 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
                           f"spp, mapping, measured, check or a .bsdf option ({', '.join(known)})")
     out = Path(out)
     stem = out.name[: -len(".xml")]
-    model_path = out.with_name(f"{stem}.kes.json")
-    model.save(model_path)
     size = dict(width=width, height=height, spp=spp)
-    write_text(out, scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin", **size))
-    paths = [out, model_path]
-    agreement, notes = {}, ["the kesbrdf-plugin scene renders the model itself (exact)"]
+    paths, agreement, notes = [], {}, []
+    if plugin:
+        model_path = out.with_name(f"{stem}.kes.json")
+        model.save(model_path)
+        write_text(out, scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin", **size))
+        paths += [out, model_path]
+        notes.append("the kesbrdf-plugin scene renders the model itself (exact)")
+    else:
+        measured = True
+        notes.append(f"the kesbrdf plugin reads models of kind 'kes', this one is {model.kind!r}: "
+                     f"{out.name} uses Mitsuba's measured plugin on the .bsdf export")
     if measured:
         bsdf_path = out.with_name(f"{stem}.bsdf")
-        r = rgl_bsdf.export(model, bsdf_path, mapping=mapping, check=check, **bsdf_options)
-        measured_path = out.with_name(f"{stem}_measured.xml")
+        r = rgl_bsdf.export(model, bsdf_path, mapping=mapping if plugin else None, check=check, **bsdf_options)
+        measured_path = out.with_name(f"{stem}_measured.xml") if plugin else out
         write_text(measured_path, scene_xml(_measured_bsdf(bsdf_path.name), title=f"{stem}: measured plugin", **size))
         paths += [measured_path, bsdf_path]
         agreement = {f"bsdf_{k}": v for k, v in r.agreement.items()}
         notes.append(f"{measured_path.name} renders {bsdf_path.name} with Mitsuba's measured plugin (approximate)")
-    open_with = (f"Python: import kesbrdf.render, mitsuba as mi; mi.render(mi.load_file('{out.name}'))"
-                 + (f"; command line: mitsuba -m scalar_rgb {stem}_measured.xml" if measured else ""))
+    open_with = "; ".join(
+        ([f"Python: import kesbrdf.render, mitsuba as mi; mi.render(mi.load_file('{out.name}'))"] if plugin else [])
+        + ([f"command line: mitsuba -m scalar_rgb {measured_path.name}"] if measured else []))
     return ExportResult("mitsuba-scene", paths, agreement=agreement, notes=notes, open_with=open_with)

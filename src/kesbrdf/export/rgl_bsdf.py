@@ -88,7 +88,10 @@ def model_brdf(model, mapping=None):
     if len(channels) not in (1, 3):
         raise ExportError(f"rgl-bsdf: expected a model with 1 (grey) or 3 (RGB) channels, got {len(channels)}")
     if mapping is None:
-        mapping = getattr(model, "default_mapping", None) or "deviation"
+        try:
+            mapping = model.default_mapping
+        except (AttributeError, IndexError):
+            mapping = "deviation"  # kesbrdf.brdf.evaluate's default; kinds with one mapping ignore it
 
     def f(w_light, w_view):
         v = np.asarray(evaluate(model, w_light, w_view, mapping), float)
