@@ -58,7 +58,10 @@ EXTENSIONS = (".bsdf",)
 HELP = "RGL tensor file for Mitsuba 3 `measured` (RGB; 'rgl-bsdf-spectral' for pbrt-v4 MeasuredBxDF)"
 
 #: Default resolution (see module docstring and docs/exports.md for how it was chosen).
-DEFAULTS = {"n_theta_i": 17, "n_phi_i": 33, "n": 48, "n_ndf": 32, "floor": 0.2, "theta_i_max_deg": 89.0}
+DEFAULTS = {"n_theta_i": 17, "n_phi_i": 33, "n": 48, "n_ndf": 32, "floor": 0.2, "theta_i_max_deg": 89.0,
+            "vndf": "microfacet"}
+#: How the visible-normal warp is built (module docstring).
+VNDF_KINDS = ("microfacet", "model")
 #: Rec. 709 / sRGB luminance weights.
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 #: Lowest cos θ_o at which a sample below the horizon is evaluated.
@@ -135,7 +138,7 @@ def _ndf_sigma(f, n_ndf: int, floor: float):
 
 
 def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, floor=None,
-                 theta_i_max_deg=None, mapping=None, spectral=False, wavelengths=None,
+                 theta_i_max_deg=None, mapping=None, vndf=None, spectral=False, wavelengths=None,
                  description=None) -> dict:
     """The tensor-file fields for ``model`` (module docstring); nothing is written.
 
@@ -188,8 +191,29 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
     m_grid = _sph(np.broadcast_to(tm, (nd, nd)), np.broadcast_to(pm, (nd, nd)))  # (nd, nd, 3)
     jac = 2 * np.pi**2 * u[None, :] * np.sin(tm)
     dots = np.maximum(np.einsum("pti,yxi->ptyx", w_in, m_grid), 0.0)
-    vndf = ndf[None, None] * dots * jac[None, None] / sig_in[:, :, None, None]
-    warp = Marginal2D(vndf, [phi_i, theta_i])
+    vndf_kind = o["vndf"] if vndf is None else vndf
+    if vndf_kind not in VNDF_KINDS:
+        raise ExportError(f"rgl-bsdf: option vndf: expected one of {', '.join(map(repr, VNDF_KINDS))}, got {vndf_kind!r}")
+    micro = ndf[None, None] * dots * jac[None, None] / sig_in[:, :, None, None]
+    if vndf_kind == "microfacet":
+        vndf_table = micro
+    else:
+        # the model's own lobe in half-vector space: Y(f_r cos θ_o) |dω_o/dm| = Y(f_r cos θ_o) 4<ω_i, m>,
+        # per incident direction, mixed with the microfacet VNDF (weight = floor) so it stays > 0
+        wi_b = np.broadcast_to(w_in[:, :, None, None, :], (npi, nt, nd, nd, 3)).reshape(-1, 3)
+        m_b = np.broadcast_to(m_grid[None, None], (npi, nt, nd, nd, 3)).reshape(-1, 3)
+        d_b = np.sum(wi_b * m_b, axis=1, keepdims=True)
+        wo_b = 2 * d_b * m_b - wi_b
+        above = wo_b[:, 2] > 0
+        lobe = np.zeros(wi_b.shape[0])
+        lobe[above] = (f(wo_b[above], wi_b[above]) @ LUMINANCE) * wo_b[above, 2] * 4 * d_b[above, 0]
+        lobe = lobe.reshape(npi, nt, nd, nd) * jac[None, None]
+        def unit(t):
+            tot = t.sum(axis=(2, 3), keepdims=True)
+            return t / np.where(tot > 0, tot, 1.0)
+        fl = float(o["floor"])
+        vndf_table = (1 - fl) * unit(lobe) + fl * unit(micro)
+    warp = Marginal2D(vndf_table, [phi_i, theta_i])
 
     # sample-space grid -> m -> ω_o, per incident direction
     s = np.linspace(0.0, 1.0, N)
@@ -215,8 +239,11 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
     d_m = ndf_i.eval(um)
     ratio = value * (4 * np.repeat(sig_in.ravel(), n_s))[:, None] / np.maximum(d_m, 1e-30)[:, None]
     rgb = ratio.reshape(npi, nt, N, N, 3).transpose(0, 1, 4, 2, 3)  # (φ_i, θ_i, 3, N(y), N(x))
-    lum = np.einsum("ptcyx,c->ptyx", rgb, LUMINANCE)
-    lum = np.maximum(lum, 1e-4 * max(float(lum.mean()), 1e-30))
+    if vndf_kind == "microfacet":
+        lum = np.einsum("ptcyx,c->ptyx", rgb, LUMINANCE)
+        lum = np.maximum(lum, 1e-4 * max(float(lum.mean()), 1e-30))
+    else:
+        lum = np.ones((npi, nt, N, N))  # the VNDF already follows f_r cos: sample it as is
 
     fields = {
         "description": description or _description(model),
@@ -225,7 +252,7 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
         "phi_i": phi_i,
         "ndf": ndf.astype(np.float32),
         "sigma": sigma.astype(np.float32),
-        "vndf": vndf.astype(np.float32),
+        "vndf": vndf_table.astype(np.float32),
         "luminance": lum.astype(np.float32),
     }
     if spectral:
@@ -321,19 +348,20 @@ def _export(model, out, spectral, check, **options) -> ExportResult:
 
 
 def export(model, out, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, floor=None,
-           theta_i_max_deg=None, mapping=None, description=None, check=True) -> ExportResult:
+           theta_i_max_deg=None, mapping=None, vndf=None, description=None, check=True) -> ExportResult:
     """Write the RGB tensor file (Mitsuba 3 ``measured``); options as :func:`build_fields`.
 
     ``check`` (default true) measures the agreement of the written file with the model.
     """
     return _export(model, out, False, check, n_theta_i=n_theta_i, n_phi_i=n_phi_i, n=n, n_ndf=n_ndf,
-                   floor=floor, theta_i_max_deg=theta_i_max_deg, mapping=mapping, description=description)
+                   floor=floor, theta_i_max_deg=theta_i_max_deg, mapping=mapping, vndf=vndf,
+                   description=description)
 
 
 def export_spectral(model, out, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, floor=None,
-                    theta_i_max_deg=None, mapping=None, description=None, wavelengths=None,
+                    theta_i_max_deg=None, mapping=None, vndf=None, description=None, wavelengths=None,
                     check=True) -> ExportResult:
     """Write the spectral tensor file (pbrt-v4 ``MeasuredBxDF``, Mitsuba spectral variants)."""
     return _export(model, out, True, check, n_theta_i=n_theta_i, n_phi_i=n_phi_i, n=n, n_ndf=n_ndf,
-                   floor=floor, theta_i_max_deg=theta_i_max_deg, mapping=mapping, description=description,
-                   wavelengths=wavelengths)
+                   floor=floor, theta_i_max_deg=theta_i_max_deg, mapping=mapping, vndf=vndf,
+                   description=description, wavelengths=wavelengths)
