@@ -214,3 +214,42 @@ def test_render_matches_plugin(model, exported, tmp_path):
     _, flip, _ = flip_evaluator.evaluate(np.maximum(ref, 0), np.maximum(test, 0), "HDR")
     assert rmse < RENDER_RMSE_BOUND, rmse
     assert flip < FLIP_BOUND, flip
+
+
+def test_model_vndf_option_loads_agrees_and_samples_unbiased(model, tmp_path, rng):
+    """``vndf="model"``: the warp follows the model's lobe, luminance is flat (docs/exports.md)."""
+    from kesbrdf._drjit import import_mitsuba
+    from kesbrdf.brdf import evaluate
+    from kesbrdf.export import export
+    from kesbrdf.io.tensor_file import read_tensor_file
+    from kesbrdf.references.rgl import _Variant, eval_plugin, load_plugin
+
+    path = tmp_path / "model_vndf.bsdf"
+    export(model, "rgl-bsdf", path, check=False, vndf="model", **GRID)
+    assert np.all(read_tensor_file(path)["luminance"] == 1)
+    bsdf = load_plugin({"type": "measured", "filename": str(path)})
+    w_view, w_light = _dirs(rng, N_PAIRS), _dirs(rng, N_PAIRS)
+    got = _lum(eval_plugin(bsdf, w_view, w_light))
+    want = _lum(evaluate(model, w_light, w_view, "deviation") * w_light[:, 2:3])
+    rel = np.abs(got - want) / want
+    assert np.median(rel) < MEDIAN_BOUND and np.percentile(rel, 90) < P90_BOUND
+    mi, dr = import_mitsuba("test")
+    t = np.radians(45.0)
+    wv = np.array([np.sin(t), 0.0, np.cos(t)])
+    n = 1 << 16
+    with _Variant(mi):
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = mi.Vector3f(*[float(c) for c in wv])
+        si.sh_frame = mi.Frame3f(mi.Vector3f(0.0, 0.0, 1.0))
+        sampler = mi.load_dict({"type": "independent"})
+        sampler.seed(5, n)
+        _, weight = bsdf.sample(mi.BSDFContext(), si, sampler.next_1d(), sampler.next_2d())
+        mean = _lum(np.array(weight, float).T).mean()
+    x, w = np.polynomial.legendre.leggauss(64)
+    th = (x + 1) * np.pi / 4
+    ph = (np.arange(128) + 0.5) * 2 * np.pi / 128
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    wl = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
+    wq = ((w * np.pi / 4 * np.sin(th) * np.cos(th))[:, None] * np.full(128, 2 * np.pi / 128)).ravel()
+    albedo = _lum(np.einsum("n,nc->c", wq, evaluate(model, wl, wv[None, :], "deviation")))
+    assert mean == pytest.approx(albedo, rel=SAMPLING_BOUND)
