@@ -60,6 +60,8 @@ HELP = "RGL tensor file for Mitsuba 3 `measured` (RGB; 'rgl-bsdf-spectral' for p
 #: Default resolution (see module docstring and docs/exports.md for how it was chosen).
 DEFAULTS = {"n_theta_i": 17, "n_phi_i": 33, "n": 48, "n_ndf": 32, "floor": 0.2, "theta_i_max_deg": 89.0,
             "vndf": "microfacet"}
+#: Table resolution of the spectral variant (about 44 MiB with 17 wavelengths).
+SPECTRAL_N = 32
 #: How the visible-normal warp is built (module docstring).
 VNDF_KINDS = ("microfacet", "model")
 #: Rec. 709 / sRGB luminance weights.
@@ -361,7 +363,12 @@ def export(model, out, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, floo
 def export_spectral(model, out, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, floor=None,
                     theta_i_max_deg=None, mapping=None, vndf=None, description=None, wavelengths=None,
                     check=True) -> ExportResult:
-    """Write the spectral tensor file (pbrt-v4 ``MeasuredBxDF``, Mitsuba spectral variants)."""
+    """Write the spectral tensor file (pbrt-v4 ``MeasuredBxDF``, Mitsuba spectral variants).
+
+    The table resolution defaults to :data:`SPECTRAL_N` (not ``DEFAULTS["n"]``): the file
+    holds 17 wavelengths instead of 3 channels.
+    """
+    n = SPECTRAL_N if n is None else n
     return _export(model, out, True, check, n_theta_i=n_theta_i, n_phi_i=n_phi_i, n=n, n_ndf=n_ndf,
                    floor=floor, theta_i_max_deg=theta_i_max_deg, mapping=mapping, vndf=vndf,
                    description=description, wavelengths=wavelengths)

@@ -28,7 +28,9 @@ import numpy as np
 
 __all__ = ["WAVELENGTHS", "basis", "to_rgb", "cie_xyz", "XYZ_TO_RGB"]
 
-#: nm; the wavelength nodes written in spectral files (17 values, 25 nm apart)
+#: nm; the wavelength nodes written in spectral files (17 values, 25 nm apart: the
+#: file size grows with their number; grey stays within 15 % of flat at 25 nm, 30 % at
+#: 40 nm, 3 % at 10 nm; the readers interpolate linearly between them)
 WAVELENGTHS = np.arange(380.0, 781.0, 25.0)
 #: CIE XYZ -> linear sRGB / Rec. 709 primaries
 XYZ_TO_RGB = np.array([
