@@ -4,7 +4,8 @@ For each grid (θ_i × φ_i × N², NDF resolution, floor ε): file size, writer
 agreement of Mitsuba 3's own ``measured`` ``eval`` with :func:`kesbrdf.brdf.evaluate`
 (relative error of f_r·cos θ_o on the luminance, median / p90 / p99 and value-weighted,
 split grazing (either direction beyond 60°) vs not) at 20 000 random pairs with
-cos θ > 0.1, on two fitted fabrics (anisotropic Ward, Sadeghi satin).
+cos θ > 0.1, on three fitted fabrics (anisotropic Ward, Sadeghi satin, a narrow
+satin-like Ward on a dark body).
 ``run()`` returns named numbers; run alone with
 ``PYTHONPATH=src python benchmarks/run.py --only export --output /tmp/export-bench.json``.
 """
@@ -28,6 +29,7 @@ GRIDS = [
     ("25x33x48_ndf32_floor0.2", dict(n_theta_i=25)),
     ("17x49x48_ndf32_floor0.2", dict(n_phi_i=49)),
     ("17x33x64_ndf32_floor0.2", dict(n=64)),
+    ("17x33x48_ndf32_floor0.2_vndf_model", dict(vndf="model")),
 ]
 N_PAIRS = 20000
 MIN_COS = 0.1
@@ -42,6 +44,8 @@ def _models():
     return {
         "ward": fit(measure(AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1))),
         "sadeghi_satin": fit(measure(Sadeghi2013(preset="satin")), fallback="log"),
+        # narrow satin-like lobe on a dark body (the CLI's "satin-ward" reference)
+        "satin_ward": fit(measure(AnisotropicWard(0.08, 0.22, rho_d=0.02, rho_s=0.12))),
     }
 
 
