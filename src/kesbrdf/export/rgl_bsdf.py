@@ -85,6 +85,16 @@ def _u2phi(u):
     return (2 * u - 1) * np.pi
 
 
+def resolve_mapping(model, mapping=None) -> str:
+    """``mapping``, or the model kind's default (``deviation`` for kinds that have none)."""
+    if mapping is not None:
+        return mapping
+    try:
+        return model.default_mapping
+    except (AttributeError, IndexError):
+        return "deviation"  # kesbrdf.brdf.evaluate's default; kinds with one mapping ignore it
+
+
 def model_brdf(model, mapping=None):
     """f(w_light, w_view) -> (n, 3) RGB in 1/sr for a model of 1 or 3 channels."""
     from kesbrdf.brdf import evaluate
@@ -92,11 +102,7 @@ def model_brdf(model, mapping=None):
     channels = getattr(model, "channels", ())
     if len(channels) not in (1, 3):
         raise ExportError(f"rgl-bsdf: expected a model with 1 (grey) or 3 (RGB) channels, got {len(channels)}")
-    if mapping is None:
-        try:
-            mapping = model.default_mapping
-        except (AttributeError, IndexError):
-            mapping = "deviation"  # kesbrdf.brdf.evaluate's default; kinds with one mapping ignore it
+    mapping = resolve_mapping(model, mapping)
 
     def f(w_light, w_view):
         v = np.asarray(evaluate(model, w_light, w_view, mapping), float)
@@ -139,6 +145,27 @@ def _ndf_sigma(f, n_ndf: int, floor: float):
     return d, sigma.reshape(n_ndf, n_ndf)
 
 
+def _unit_slices(t):
+    """Each (φ_i, θ_i) slice scaled to unit sum."""
+    total = t.sum(axis=(2, 3), keepdims=True)
+    return t / np.where(total > 0, total, 1.0)
+
+
+def _lobe_vndf(f, w_in, m_grid, jac):
+    """The model's own lobe in u-space of the half vector, per incident direction:
+    Y(f_r cos θ_o) |dω_o/dm| 2π² u_θ sin θ_m, with |dω_o/dm| = 4⟨ω_i, m⟩ (``vndf="model"``)."""
+    npi, nt = w_in.shape[:2]
+    nd = m_grid.shape[0]
+    wi = np.broadcast_to(w_in[:, :, None, None, :], (npi, nt, nd, nd, 3)).reshape(-1, 3)
+    m = np.broadcast_to(m_grid[None, None], (npi, nt, nd, nd, 3)).reshape(-1, 3)
+    dot = np.sum(wi * m, axis=1)
+    wo = 2 * dot[:, None] * m - wi
+    above = (wo[:, 2] > 0) & (dot > 0)
+    lobe = np.zeros(wi.shape[0])
+    lobe[above] = (f(wo[above], wi[above]) @ LUMINANCE) * wo[above, 2] * 4 * dot[above]
+    return lobe.reshape(npi, nt, nd, nd) * jac[None, None]
+
+
 def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, floor=None,
                  theta_i_max_deg=None, mapping=None, vndf=None, spectral=False, wavelengths=None,
                  description=None) -> dict:
@@ -154,7 +181,15 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
     n_ndf : int
         Resolution of the NDF, σ and VNDF grids (square).
     floor : float
-        ε, weight of the cosine floor in D.
+        ε, weight of the cosine floor in D (and of the microfacet VNDF when ``vndf="model"``).
+    theta_i_max_deg : float
+        Last θ_i node (< 90°); beyond it the readers use the last node.
+    mapping : str, optional
+        Passed to :func:`kesbrdf.brdf.evaluate`; default the kind's own.
+    vndf : {"microfacet", "model"}
+        ``microfacet`` (default): D(m)⟨ω_i, m⟩/σ(ω_i), the luminance = Y of the table
+        (Dupuy & Jakob).  ``model``: the model's lobe in half-vector space, luminance 1
+        (docs/exports.md compares them).
     spectral : bool
         Write ``spectra`` + ``wavelengths`` (pbrt-v4) instead of ``rgb``.
     wavelengths : array_like, optional
@@ -170,6 +205,9 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
             raise ExportError(f"rgl-bsdf: option {k}: expected an integer >= {3 if k == 'n_phi_i' else 2}, got {o[k]!r}")
     if not (0 < float(o["floor"]) < 1):
         raise ExportError(f"rgl-bsdf: option floor: expected a number in (0, 1), got {o['floor']!r}")
+    vndf_kind = o["vndf"] if vndf is None else vndf
+    if vndf_kind not in VNDF_KINDS:
+        raise ExportError(f"rgl-bsdf: option vndf: expected one of {', '.join(map(repr, VNDF_KINDS))}, got {vndf_kind!r}")
     if not (0 < float(o["theta_i_max_deg"]) < 90):
         raise ExportError(f"rgl-bsdf: option theta_i_max_deg: expected degrees in (0, 90), got {o['theta_i_max_deg']!r}")
     f = model_brdf(model, mapping)
@@ -193,28 +231,12 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
     m_grid = _sph(np.broadcast_to(tm, (nd, nd)), np.broadcast_to(pm, (nd, nd)))  # (nd, nd, 3)
     jac = 2 * np.pi**2 * u[None, :] * np.sin(tm)
     dots = np.maximum(np.einsum("pti,yxi->ptyx", w_in, m_grid), 0.0)
-    vndf_kind = o["vndf"] if vndf is None else vndf
-    if vndf_kind not in VNDF_KINDS:
-        raise ExportError(f"rgl-bsdf: option vndf: expected one of {', '.join(map(repr, VNDF_KINDS))}, got {vndf_kind!r}")
     micro = ndf[None, None] * dots * jac[None, None] / sig_in[:, :, None, None]
     if vndf_kind == "microfacet":
         vndf_table = micro
     else:
-        # the model's own lobe in half-vector space: Y(f_r cos θ_o) |dω_o/dm| = Y(f_r cos θ_o) 4<ω_i, m>,
-        # per incident direction, mixed with the microfacet VNDF (weight = floor) so it stays > 0
-        wi_b = np.broadcast_to(w_in[:, :, None, None, :], (npi, nt, nd, nd, 3)).reshape(-1, 3)
-        m_b = np.broadcast_to(m_grid[None, None], (npi, nt, nd, nd, 3)).reshape(-1, 3)
-        d_b = np.sum(wi_b * m_b, axis=1, keepdims=True)
-        wo_b = 2 * d_b * m_b - wi_b
-        above = wo_b[:, 2] > 0
-        lobe = np.zeros(wi_b.shape[0])
-        lobe[above] = (f(wo_b[above], wi_b[above]) @ LUMINANCE) * wo_b[above, 2] * 4 * d_b[above, 0]
-        lobe = lobe.reshape(npi, nt, nd, nd) * jac[None, None]
-        def unit(t):
-            tot = t.sum(axis=(2, 3), keepdims=True)
-            return t / np.where(tot > 0, tot, 1.0)
         fl = float(o["floor"])
-        vndf_table = (1 - fl) * unit(lobe) + fl * unit(micro)
+        vndf_table = (1 - fl) * _unit_slices(_lobe_vndf(f, w_in, m_grid, jac)) + fl * _unit_slices(micro)
     warp = Marginal2D(vndf_table, [phi_i, theta_i])
 
     # sample-space grid -> m -> ω_o, per incident direction
@@ -248,7 +270,8 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
         lum = np.ones((npi, nt, N, N))  # the VNDF already follows f_r cos: sample it as is
 
     fields = {
-        "description": description or _description(model),
+        "description": description or _description(model, {**o, "vndf": vndf_kind, "mapping": resolve_mapping(model, mapping),
+                                                             "spectral": bool(spectral)}),
         "jacobian": np.array([1], np.uint8),
         "theta_i": theta_i,
         "phi_i": phi_i,
@@ -269,11 +292,28 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
     return fields
 
 
-def _description(model) -> str:
+def model_sha256(model) -> str:
+    """sha256 of the model's file content (what ``model.save`` writes), for provenance."""
+    import hashlib
+    import json
+
+    try:
+        from kesbrdf.io.model_file import model_to_dict
+
+        text = json.dumps(model_to_dict(model), sort_keys=True, default=str)
+    except Exception:  # a kind without a model-file form: hash what identifies it
+        text = repr((getattr(model, "kind", ""), getattr(model, "parameters", {})))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _description(model, options: dict) -> str:
+    """Human-readable provenance in the file's ``description`` (readers print it)."""
+    from kesbrdf._version import __version__
+
     kind = getattr(model, "kind", "model")
-    src = getattr(model, "input_info", {}) or {}
-    name = src.get("source") or src.get("reference") or ""
-    return f"kesbrdf {kind} model{(' ' + str(name)) if name else ''} (exported by kesbrdf)"
+    grid = ", ".join(f"{k}={v}" for k, v in options.items())
+    return (f"kesbrdf {kind} model (sha256 {model_sha256(model)[:16]}), exported by kesbrdf {__version__}; "
+            f"{grid}")
 
 
 def agreement(model, path, n_pairs: int = 4000, seed: int = 0, min_cos: float = 0.2, mapping=None) -> dict:
