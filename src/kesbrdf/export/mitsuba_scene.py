@@ -163,14 +163,17 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
     if unknown:
         raise ExportError(f"mitsuba-scene: unknown option(s) {', '.join(map(repr, unknown))}; expected width, height, "
                           f"spp, mapping, measured, check or a .bsdf option ({', '.join(known)})")
+    from kesbrdf._version import __version__
+
     out = Path(out)
     stem = out.name[: -len(".xml")]
     size = dict(width=width, height=height, spp=spp)
+    origin = f"kesbrdf {__version__}, model sha256 {rgl_bsdf.model_sha256(model)[:16]}"
     paths, agreement, notes = [], {}, []
     if plugin:
         model_path = out.with_name(f"{stem}.kes.json")
         model.save(model_path)
-        write_text(out, scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin", **size))
+        write_text(out, scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin ({origin})", **size))
         paths += [out, model_path]
         notes.append("the kesbrdf-plugin scene renders the model itself (exact)")
     else:
@@ -181,7 +184,7 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
         bsdf_path = out.with_name(f"{stem}.bsdf")
         r = rgl_bsdf.export(model, bsdf_path, mapping=mapping if plugin else None, check=check, **bsdf_options)
         measured_path = out.with_name(f"{stem}_measured.xml") if plugin else out
-        write_text(measured_path, scene_xml(_measured_bsdf(bsdf_path.name), title=f"{stem}: measured plugin", **size))
+        write_text(measured_path, scene_xml(_measured_bsdf(bsdf_path.name), title=f"{stem}: measured plugin ({origin})", **size))
         paths += [measured_path, bsdf_path]
         agreement = {f"bsdf_{k}": v for k, v in r.agreement.items()}
         notes.append(f"{measured_path.name} renders {bsdf_path.name} with Mitsuba's measured plugin (approximate)")
