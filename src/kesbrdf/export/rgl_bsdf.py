@@ -21,6 +21,10 @@ The parameterisation is built from the model itself (Dupuy & Jakob sec. 4–5):
 * **VNDF** per (φ_i, θ_i): D(m)⟨ω_i, m⟩₊/σ(ω_i) times the u-space Jacobian 2π² u_θ sin θ_m;
 * **luminance**: Y = 0.2126 R + 0.7152 G + 0.0722 B of the stored table (sampling only).
 
+Option ``vndf="model"`` replaces the VNDF by the model's own lobe in half-vector space
+(and the luminance by 1): better value-weighted agreement on narrow satins, worse 90th
+percentiles elsewhere (``docs/exports.md``).
+
 The writer divides by the *interpolated* D(u_m) and σ(u_i) that the reader computes,
 so that the ratio is exact at the grid nodes.  The model is evaluated as Mitsuba
 renders it: the table's incident direction is Mitsuba's ``si.wi`` (toward the camera,
@@ -29,7 +33,7 @@ fixes where the cosine sits.  Frame: Mitsuba's shading frame (s, t, n) = (warp, 
 normal), i.e. the fabric frame.  Outgoing directions that fall below the horizon are
 evaluated at z = 10⁻³ (they still enter the interpolation).
 
-Grid (default 17 θ_i × 33 φ_i × 48², NDF/VNDF 32 × 32, about 23 MiB) and floor ε = 0.2 were
+Grid (default 17 θ_i × 33 φ_i × 48², NDF/VNDF 32 × 32, 21.9 MiB) and floor ε = 0.2 were
 chosen from measured error (``benchmarks/bench_export.py``, table in ``docs/exports.md``):
 halving φ_i (33 → 17) costs most, then the table resolution N (32 → 48 halves the error at
 the nodes on a satin), then θ_i (17 → 25 gains little); the NDF resolution (32 vs 64)
@@ -38,7 +42,7 @@ worst.
 
 Spectral variant (pbrt-v4 has no RGB path): each RGB table value is turned into a
 spectrum by the linear smooth basis of :mod:`kesbrdf.export.spectra`
-(ρ(λ) = R b_R(λ) + G b_G(λ) + B b_B(λ), b ≥ 0, b_R + b_G + b_B = 1), sampled at
+(ρ(λ) = R b_R(λ) + G b_G(λ) + B b_B(λ), b ≥ 0, b_R + b_G + b_B ≈ 1), sampled at
 ``wavelengths``.  φ_i covers [−π, π] (reduction 1), which pbrt-v4 requires.
 """
 
