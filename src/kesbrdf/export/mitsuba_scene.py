@@ -170,23 +170,26 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
     size = dict(width=width, height=height, spp=spp)
     origin = f"kesbrdf {__version__}, model sha256 {rgl_bsdf.model_sha256(model)[:16]}"
     paths, agreement, notes = [], {}, []
+    measured = measured or not plugin
+    if measured:  # the slow part first: a failure leaves no scene pointing at a missing file
+        bsdf_path = out.with_name(f"{stem}.bsdf")
+        r = rgl_bsdf.export(model, bsdf_path, mapping=mapping if plugin else None, check=check, **bsdf_options)
+        agreement = {f"bsdf_{k}": v for k, v in r.agreement.items()}
     if plugin:
         model_path = out.with_name(f"{stem}.kes.json")
         model.save(model_path)
-        write_text(out, scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin ({origin})", **size))
+        text = scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin ({origin})", **size)
+        write_text(out, text)
         paths += [out, model_path]
         notes.append("the kesbrdf-plugin scene renders the model itself (exact)")
     else:
-        measured = True
         notes.append(f"the kesbrdf plugin reads models of kind 'kes', this one is {model.kind!r}: "
                      f"{out.name} uses Mitsuba's measured plugin on the .bsdf export")
     if measured:
-        bsdf_path = out.with_name(f"{stem}.bsdf")
-        r = rgl_bsdf.export(model, bsdf_path, mapping=mapping if plugin else None, check=check, **bsdf_options)
         measured_path = out.with_name(f"{stem}_measured.xml") if plugin else out
-        write_text(measured_path, scene_xml(_measured_bsdf(bsdf_path.name), title=f"{stem}: measured plugin ({origin})", **size))
+        text = scene_xml(_measured_bsdf(bsdf_path.name), title=f"{stem}: measured plugin ({origin})", **size)
+        write_text(measured_path, text)
         paths += [measured_path, bsdf_path]
-        agreement = {f"bsdf_{k}": v for k, v in r.agreement.items()}
         notes.append(f"{measured_path.name} renders {bsdf_path.name} with Mitsuba's measured plugin (approximate)")
     open_with = "; ".join(
         ([f"Python: import kesbrdf.render, mitsuba as mi; mi.render(mi.load_file('{out.name}'))"] if plugin else [])
