@@ -17,7 +17,9 @@ reference implementation of exactly that, it is vectorised (LLVM backend: 1.4 mi
 evaluations a second on this 2-core machine) and it is the code that renders these materials.
 A second implementation in numpy would be a re-derivation without a reference to
 check it against.  So this module calls the plugin, variant ``llvm_ad_rgb`` (the one
-:mod:`kesbrdf.render` uses).  It needs the extra ``kesbrdf[render]``.
+:mod:`kesbrdf.render` uses).  It needs the extra ``kesbrdf[render]``.  Without Mitsuba,
+:class:`kesbrdf.references.rgl_tensor.RGLTensorBRDF` is the same algorithm in numpy,
+checked against this plugin (``tests/export/test_importers.py``).
 
 Conventions (checked in ``tests/references/test_rgl.py``)
 -----------------------------------------------------------
