@@ -81,3 +81,17 @@ def test_tensor_file_roundtrip_is_byte_identical(tmp_path):
         assert back[k].dtype == fields[k].dtype and np.array_equal(back[k], fields[k])
     # the reference writer's layout (8-byte aligned blobs in field order) gives the same bytes
     assert out.read_bytes() == FELT.read_bytes()
+
+
+def test_tensor_file_roundtrip_of_every_dtype(tmp_path, rng):
+    from kesbrdf.io.tensor_file import DTYPE_CODES, read_tensor_file, write_tensor_file
+
+    fields = {"description": "ünïcode text"}
+    for k, dt in enumerate(DTYPE_CODES):
+        shape = tuple(int(v) for v in rng.integers(1, 5, size=int(rng.integers(0, 4))))
+        fields[f"f{k}"] = (rng.normal(size=shape) * 50).astype(dt)
+    back = read_tensor_file(write_tensor_file(tmp_path / "t.bsdf", fields))
+    assert bytes(back["description"]).decode("utf-8") == "ünïcode text"
+    for k, dt in enumerate(DTYPE_CODES):
+        a = back[f"f{k}"]
+        assert a.dtype == dt and a.shape == fields[f"f{k}"].shape and np.array_equal(a, fields[f"f{k}"])

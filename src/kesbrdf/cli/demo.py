@@ -119,6 +119,9 @@ def _exports(out: Path, model, say) -> None:
     from kesbrdf.errors import KesbrdfError
     from kesbrdf.export import export, format_module, format_names
 
+    from kesbrdf._atomic import write_text
+
+    summary = {}
     for fmt in format_names():
         try:
             ext = (getattr(format_module(fmt), "EXTENSIONS", ()) or ("",))[0]
@@ -126,8 +129,11 @@ def _exports(out: Path, model, say) -> None:
         except (ImportError, KesbrdfError) as exc:
             say(f"export {fmt} skipped ({exc})")
             continue
+        summary[fmt] = result.to_json()
         size = result.size / 2**20
         say(f"export {fmt}: {result.paths[0]} ({size:.1f} MiB); open with: {result.open_with}")
+    if summary:
+        write_text(out / "exports" / "exports.json", json.dumps(summary, indent=1) + "\n")
 
 
 def _renders(out: Path, model_path: Path, say) -> None:

@@ -46,7 +46,8 @@ def tensor_file_bytes(fields: dict) -> bytes:
             value = value.encode("utf-8")
         if isinstance(value, (bytes, bytearray)):
             value = np.frombuffer(bytes(value), np.uint8)
-        a = np.ascontiguousarray(value)
+        a = np.asarray(value)  # not ascontiguousarray: it turns 0-d arrays into 1-d
+        a = a if a.flags.c_contiguous else a.copy(order="C")
         dt = a.dtype.newbyteorder("<") if a.dtype.byteorder == ">" else a.dtype
         if dt not in DTYPE_CODES:
             raise FormatError(f"tensor file field {name!r}: expected a numeric dtype, got {a.dtype}")
