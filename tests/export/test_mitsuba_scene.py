@@ -80,3 +80,28 @@ def test_other_kinds_get_the_measured_scene(tmp_path):
     assert 'type="measured"' in (tmp_path / "hd.xml").read_text()
     img = np.array(mi.render(mi.load_file(str(tmp_path / "hd.xml"), spp=4, width=16, height=12)), float)
     assert np.all(np.isfinite(img)) and img.mean() > 0.01
+
+
+def test_measured_scene_renders_in_the_mitsuba_command_line(scene_files, tmp_path):
+    """The ``measured`` scene needs no Python: Mitsuba's own executable renders it."""
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    exe = Path(sys.executable).with_name("mitsuba")
+    exe = str(exe) if exe.exists() else shutil.which("mitsuba")
+    if exe is None:
+        pytest.skip("no mitsuba executable")
+    out, _ = scene_files
+    img = tmp_path / "cli.exr"
+    env = dict(os.environ)
+    from kesbrdf._drjit import LLVM_CANDIDATES
+
+    env.setdefault("DRJIT_LIBLLVM_PATH", next((c for c in LLVM_CANDIDATES if Path(c).exists()), ""))
+    run = subprocess.run([exe, "-m", "scalar_rgb", "-Dspp=2", "-Dwidth=16", "-Dheight=12", "-o", str(img),
+                          str(out.parent / "fabric_measured.xml")], capture_output=True, text=True, env=env,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert img.is_file() and img.stat().st_size > 0
