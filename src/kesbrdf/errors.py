@@ -16,6 +16,7 @@ __all__ = [
     "MeasurementError",
     "KESError",
     "ModelError",
+    "ExportError",
     "where",
     "validate_choice",
 ]
@@ -103,3 +104,5 @@ def validate_choice(
         shown = shown[:77] + "..."
     listed = ", ".join(str(c) for c in choices)
     raise error(f"{where(source, line)}{name}: expected one of {listed}, got {shown}")
+class ExportError(KesbrdfError):
+    """An export cannot be written as asked (format, output path, options, model kind)."""

@@ -110,10 +110,33 @@ def run(args) -> int:
         say("figures + report skipped (install kesbrdf[plot])")
 
     if not args.quick:
+        _exports(out, model, say)
         _renders(out, model_path, say)
     stderr(f"demo outputs in {out}/")
     stderr(f"open the interactive viewer on this model:  kesbrdf view {model_path}")
     return 0
+
+
+def _exports(out: Path, model, say) -> None:
+    """Every export format into out/exports/<format>/ (docs/exports.md), with where it opens."""
+    from kesbrdf.errors import KesbrdfError
+    from kesbrdf.export import export, format_module, format_names
+
+    from kesbrdf._atomic import write_text
+
+    summary = {}
+    for fmt in format_names():
+        try:
+            ext = (getattr(format_module(fmt), "EXTENSIONS", ()) or ("",))[0]
+            result = export(model, fmt, out / "exports" / fmt / f"fabric{ext}")
+        except (ImportError, KesbrdfError) as exc:
+            say(f"export {fmt} skipped ({exc})")
+            continue
+        summary[fmt] = result.to_json()
+        size = result.size / 2**20
+        say(f"export {fmt}: {result.paths[0]} ({size:.1f} MiB); open with: {result.open_with}")
+    if summary:
+        write_text(out / "exports" / "exports.json", json.dumps(summary, indent=1) + "\n")
 
 
 def _renders(out: Path, model_path: Path, say) -> None:

@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "render": "render",
     "drape": "drape",
     "colourways": "colourways",
+    "export": "export",
     "view": "view",
     "demo": "demo",
 }

@@ -17,7 +17,9 @@ reference implementation of exactly that, it is vectorised (LLVM backend: 1.4 mi
 evaluations a second on this 2-core machine) and it is the code that renders these materials.
 A second implementation in numpy would be a re-derivation without a reference to
 check it against.  So this module calls the plugin, variant ``llvm_ad_rgb`` (the one
-:mod:`kesbrdf.render` uses).  It needs the extra ``kesbrdf[render]``.
+:mod:`kesbrdf.render` uses).  It needs the extra ``kesbrdf[render]``.  Without Mitsuba,
+:class:`kesbrdf.references.rgl_tensor.RGLTensorBRDF` is the same algorithm in numpy,
+checked against this plugin (``tests/export/test_importers.py``).
 
 Conventions (checked in ``tests/references/test_rgl.py``)
 -----------------------------------------------------------
@@ -41,13 +43,13 @@ Conventions (checked in ``tests/references/test_rgl.py``)
 from __future__ import annotations
 
 import hashlib
-import struct
 from pathlib import Path
 
 import numpy as np
 
 from kesbrdf._drjit import import_mitsuba
-from kesbrdf.errors import FormatError, where, validate_choice
+from kesbrdf.errors import FormatError, validate_choice, where
+from kesbrdf.io.tensor_file import read_tensor_file
 
 __all__ = ["RGLMeasured", "read_tensor_file", "eval_plugin", "load_plugin", "VARIANT", "TENSOR_FIELDS_RGB"]
 
@@ -55,62 +57,6 @@ __all__ = ["RGLMeasured", "read_tensor_file", "eval_plugin", "load_plugin", "VAR
 VARIANT = "llvm_ad_rgb"
 #: Fields an RGB tensor file of the database must hold.
 TENSOR_FIELDS_RGB = ("theta_i", "phi_i", "ndf", "sigma", "vndf", "luminance", "rgb", "jacobian")
-#: Magic bytes at the start of a Mitsuba tensor file.
-_MAGIC = b"tensor_file\0"
-#: Tensor-file dtype codes (Mitsuba ``Struct::Type``) to numpy.
-_DTYPES = {1: "u1", 2: "i1", 3: "u2", 4: "i2", 5: "u4", 6: "i4", 7: "u8", 8: "i8", 9: "f2", 10: "f4", 11: "f8"}
-
-
-def read_tensor_file(path) -> dict:
-    """Read a Mitsuba tensor file (the RGL database's ``*.bsdf``) into numpy arrays.
-
-    Used to validate a file and read its description before Mitsuba loads it.
-
-    Parameters
-    ----------
-    path : str or Path
-
-    Returns
-    -------
-    dict
-        Field name -> ndarray (little-endian, read-only views of the file bytes).
-
-    Raises
-    ------
-    FormatError
-        Not a tensor file, or truncated.
-    """
-    path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise FormatError(f"{where(path)}expected a readable RGL tensor file (*.bsdf), got {exc.strerror}") from exc
-    if data[: len(_MAGIC)] != _MAGIC:
-        raise FormatError(f"{where(path)}expected a Mitsuba tensor file starting with 'tensor_file', got {data[:12]!r}")
-    fields = {}
-    try:
-        pos = len(_MAGIC) + 2  # magic, format version (2 bytes)
-        (count,) = struct.unpack_from("<I", data, pos)
-        pos += 4
-        for _ in range(count):
-            (name_len,) = struct.unpack_from("<H", data, pos)
-            pos += 2
-            name = data[pos : pos + name_len].decode("ascii")
-            pos += name_len
-            ndim, code, offset = struct.unpack_from("<HBQ", data, pos)
-            pos += 11
-            shape = struct.unpack_from("<" + "Q" * ndim, data, pos)
-            pos += 8 * ndim
-            dtype = np.dtype(_DTYPES[code]).newbyteorder("<")
-            size = int(np.prod(shape)) if ndim else 1
-            if offset + size * dtype.itemsize > len(data):
-                raise ValueError(f"field {name!r} runs past the end of the file")
-            fields[name] = np.frombuffer(data, dtype, size, offset).reshape(shape)
-    except (struct.error, KeyError, ValueError, UnicodeDecodeError) as exc:
-        raise FormatError(f"{where(path)}expected a well-formed tensor file, got a corrupt header ({exc})") from exc
-    return fields
-
-
 def _import_mitsuba():
     return import_mitsuba("kesbrdf.references.rgl")
 

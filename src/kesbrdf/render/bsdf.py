@@ -137,6 +137,9 @@ class KesBSDF(mi.BSDF):
         if filename is None:
             raise ModelError("kesbrdf BSDF: expected a 'filename' parameter (a model file), got none")
         path = Path(str(filename))
+        if not path.is_absolute() and not path.exists():
+            # relative to the scene file, as Mitsuba resolves its own filenames (mi.load_file)
+            path = Path(str(mi.file_resolver().resolve(str(filename))))
         model = load(path)
         self.filename = str(path)
         mapping = str(_prop(props, "mapping", "deviation"))
