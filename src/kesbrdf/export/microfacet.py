@@ -217,8 +217,8 @@ def zeltner_sheen(wi, wr, roughness):
     ox = a_inv * wx + b_inv * wz
     oy = a_inv * wy
     len2 = ox**2 + oy**2 + wz**2
-    D = np.maximum(wz / np.sqrt(len2), 0.0) / np.pi * (a_inv / len2) ** 2
-    return zeltner_sheen_albedo(nv, y) * D / np.maximum(wz, 1e-6)
+    # D_ltc(w) = D_o(M⁻¹w/|M⁻¹w|)·|M⁻¹|/|M⁻¹w|³ = (w_z/π)·(a_inv/|M⁻¹w|²)², and f = E·D_ltc/w_z
+    return np.where(wz > 0, zeltner_sheen_albedo(nv, y) / np.pi * (a_inv / len2) ** 2, 0.0)
 
 
 def ggx_directional_albedo(cos_r, alpha, F0, F90):
