@@ -32,7 +32,7 @@ viewer: viewer/node_modules/.installed
 demo: venv
 	$(VENV)/bin/kesbrdf demo -o $(OUT)
 
-test: venv
+test: venv $(if $(shell command -v npm 2>/dev/null),viewer)
 	$(PY) -m pytest -q
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
 

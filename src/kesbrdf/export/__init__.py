@@ -10,4 +10,7 @@ from __future__ import annotations
 __all__ = ["FORMATS"]
 
 #: format name -> module (imported on use, so each format's dependencies stay optional)
-FORMATS: dict[str, str] = {}
+FORMATS: dict[str, str] = {
+    "gltf": "kesbrdf.export.gltf",
+    "glb": "kesbrdf.export.glb",
+}

@@ -294,7 +294,7 @@ def fit_analytic(material: AnalyticMaterial, target, grid=FIT_GRID, error_grid=E
                 x0[sl], lo[sl], hi[sl] = start_rot, lo_rot, hi_rot
             if getattr(s, "size", 1) == "color" and s.name in getattr(material, "albedo_params", ()):
                 x0[sl] = np.clip(albedo, s.lo, s.hi)
-        sol = least_squares(residual, np.clip(x0, lo, hi), bounds=(lo, hi), loss="soft_l1", f_scale=SOFT_L1_SCALE, max_nfev=max_nfev, x_scale="jac")
+        sol = least_squares(residual, np.clip(x0, lo, hi), bounds=(lo, hi), loss="soft_l1", f_scale=SOFT_L1_SCALE, max_nfev=max_nfev, x_scale="jac", tr_solver="lsmr")
         results.append((float(sol.cost), start_rot, sol))
     best = min(results, key=lambda r: r[0])
     params = material.canonical(_unpack(best[2].x, layout))
