@@ -13,4 +13,6 @@ __all__ = ["FORMATS"]
 FORMATS: dict[str, str] = {
     "gltf": "kesbrdf.export.gltf",
     "glb": "kesbrdf.export.glb",
+    "mtlx": "kesbrdf.export.mtlx",
+    "usd": "kesbrdf.export.usd",
 }
