@@ -15,4 +15,5 @@ FORMATS: dict[str, str] = {
     "glb": "kesbrdf.export.glb",
     "mtlx": "kesbrdf.export.mtlx",
     "usd": "kesbrdf.export.usd",
+    "brdf-explorer": "kesbrdf.export.brdf_explorer",
 }

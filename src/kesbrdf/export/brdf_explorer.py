@@ -17,7 +17,7 @@ model's ``deviation``), ``float scale`` (multiplies f_r, default 1), ``color tin
 Constant-array size.  BRDF Explorer has no texture slot for an analytic BRDF, and
 GLSL drivers compile very large constant arrays slowly or not at all, so the table is
 resampled in φ (with the model's own bilinear lookup; the γ grid is kept) to at most
-:data:`MAX_TABLE_ENTRIES` entries per channel (default 180 φ, i.e. 2°); the error this costs is measured
+:data:`MAX_TABLE_ENTRIES` entries per channel (default 90 φ, i.e. 4°); the error this costs is measured
 against the full model at random pairs and returned (and written in the file's
 header comment).  ``n_phi`` / ``n_gamma`` override the grid.
 
@@ -38,11 +38,13 @@ from kesbrdf.errors import KesbrdfError
 __all__ = ["export", "brdf_explorer_source", "resample_table", "glsl_function", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
 
 #: Largest baked table: entries per channel.  Each channel is its own ``const float``
-#: array, and ANGLE (Chromium's WebGL) rejects a private variable over 64 KiB
-#: ("Size of declared private variable exceeds implementation-defined limit", measured
-#: with one vec3 array of 10200 entries), so 16384 floats per array is the portable bound.
-MAX_TABLE_ENTRIES = 16384
-DEFAULT_N_PHI = 180
+#: array: ANGLE (Chromium's WebGL) rejects a private variable over 64 KiB ("Size of
+#: declared private variable exceeds implementation-defined limit", measured with one
+#: vec3 array of 10200 entries), and SwiftShader returned zeros for 3 × 15300 floats
+#: while 3 × 7650 (90 φ × 85 γ) evaluated correctly; 8192 per channel is the bound.
+MAX_TABLE_ENTRIES = 8192
+#: default φ resolution of the baked table (4°; the model's own is 1°)
+DEFAULT_N_PHI = 90
 OPEN_WITH = "Disney BRDF Explorer (github.com/wdas/brdf): File > Open BRDF..., then the polar, 3D, albedo and lit-sphere views"
 
 #: What BRDF Explorer puts before the BRDF function in its fragment templates
