@@ -85,3 +85,52 @@ def test_khronos_gltf_validator_reports_no_errors_or_warnings(tmp_path, kes_mode
         # infos only: the validator does not know that KHR_materials_anisotropy uses TANGENT
         assert {m["code"] for m in issues["messages"]} <= {"UNUSED_MESH_TANGENT", "UNUSED_OBJECT"}
         assert r["report"]["info"]["materialCount"] == 1
+
+
+#: three.js renders the fitted glTF with its own lobes (Neubelt sheen visibility, its
+#: energy compensation) and the fit itself is approximate (NRMSE ~0.15 here); measured
+#: relative image RMSE against the kesbrdf GLSL preview: 0.14. Bound with margin.
+THREEJS_REL_RMSE_TOL = 0.35
+
+
+def test_threejs_gltfloader_renders_next_to_kesbrdf_preview(tmp_path, kes_model, fits):
+    """three.js GLTFLoader loads the .glb (MeshPhysicalMaterial with the extensions mapped);
+    its render of the sphere is compared with the kesbrdf GLSL preview of the model."""
+    node = shutil.which("node")
+    chromium = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
+    if node is None or chromium is None:
+        pytest.skip("node and chromium are needed for the three.js check (CI has both)")
+    if not (VIEWER / "node_modules" / "three").is_dir():
+        pytest.fail("viewer/node_modules/three is missing: run `make viewer`")
+    fit = fits["gltf_pbr"]
+    glb.export(kes_model, tmp_path / "f.glb", fit=fit)
+    T = kes_model.table
+    rgba = np.concatenate([T, np.zeros(T.shape[:2] + (1,))], -1)
+    inp = {
+        "glb": str(tmp_path / "f.glb"),
+        "model": {
+            "nPhi": int(T.shape[0]),
+            "nGamma": int(T.shape[1]),
+            "dGamma": float(kes_model.gamma_grid[1] - kes_model.gamma_grid[0]),
+            "table": rgba.transpose(1, 0, 2).ravel().tolist(),
+            "body": [float(b) for b in np.broadcast_to(kes_model.body, (3,))],
+        },
+        "light": [0.5, 0.6, 1.0],
+        "size": 48,
+    }
+    (tmp_path / "in.json").write_text(json.dumps(inp))
+    proc = subprocess.run(
+        [node, str(VIEWER / "scripts" / "gltf-render.mjs"), str(tmp_path / "in.json"), str(tmp_path / "out.json")],
+        cwd=VIEWER, capture_output=True, text=True, timeout=240,
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads((tmp_path / "out.json").read_text())
+    m, p = out["material"], fit.params
+    assert m["type"] == "MeshPhysicalMaterial" and m["hasTangents"]
+    assert m["anisotropy"] == pytest.approx(p["anisotropy_strength"], rel=1e-6)
+    assert m["anisotropyRotation"] == pytest.approx(p["anisotropy_rotation"], rel=1e-6)
+    assert m["specularIntensity"] == pytest.approx(p["specular"], rel=1e-6)
+    np.testing.assert_allclose(m["sheenColor"], p["sheen_color"], rtol=1e-6)
+    assert out["pixels"] > 0.5 * inp["size"] ** 2 * np.pi / 4 * 0.5  # lit half of the disc at least
+    assert out["mean_gltf"] > 0 and out["mean_kes"] > 0
+    assert out["rel_rmse"] < THREEJS_REL_RMSE_TOL, out["rel_rmse"]
