@@ -230,7 +230,6 @@ color tint 1 1 1
 def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, seed: int = 20261201, max_theta_deg: float = 80.0) -> dict:
     """Relative error of the resampled table's f_r against the full model at random pairs."""
     from kesbrdf.brdf import evaluate
-    from kesbrdf.model import Model  # noqa: F401  (type of model)
 
     table, d_gamma = resample_table(model, n_phi, n_gamma)
     rng = np.random.default_rng(seed)
