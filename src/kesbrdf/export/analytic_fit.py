@@ -31,7 +31,9 @@ Anisotropy rotation
 
 Error report (:attr:`AnalyticFit.error`)
     ``nrmse``: RMS of (f^fit − f^ref)·cos θ_i divided by the RMS of f^ref·cos θ_i, both
-    weighted by cos θ_r dω over the error grid and pooled over channels.
+    weighted by cos θ_r dω over the error grid and pooled over channels;
+    ``nrmse_theta_le_70``: the same over pairs with θ_i, θ_r ≤ 70° (grazing pairs, where
+    the KES model extrapolates as 1/√(cos θ_i cos θ_r), dominate the full NRMSE).
     ``rel_l1``: the weighted mean |difference| over the weighted mean reference.
     ``log_rmse``: RMS of the objective's log residual.
     ``worst``: the configurations with the largest |Δ(f_r cos θ_i)| (angles in degrees).
@@ -70,6 +72,8 @@ ERROR_GRID = ((12, 24), (16, 32))
 SOFT_L1_SCALE = 0.1
 #: number of worst configurations reported.
 N_WORST = 5
+#: ``nrmse_theta_le_70`` restricts the NRMSE to pairs with both θ at most this (degrees).
+CORE_THETA_DEG = 70.0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -214,6 +218,10 @@ def fit_error(material: AnalyticMaterial, params: dict, f_ref: Callable, grid=ER
     diff = fit_c - ref_c
     nrmse = math.sqrt(float(np.sum(w * diff**2)) / max(float(np.sum(w * ref_c**2)), 1e-300))
     rel_l1 = float(np.sum(w * np.abs(diff))) / max(float(np.sum(w * np.abs(ref_c))), 1e-300)
+    # the same NRMSE away from grazing (θ_i, θ_r ≤ 70°), where the KES model does not extrapolate
+    core = (np.minimum(wi[:, 2], wr[:, 2]) >= math.cos(math.radians(CORE_THETA_DEG)))[:, None]
+    wc = w * core
+    nrmse_core = math.sqrt(float(np.sum(wc * diff**2)) / max(float(np.sum(wc * ref_c**2)), 1e-300))
     log_res = np.log1p(np.maximum(fit_c, 0)) - np.log1p(np.maximum(ref_c, 0))
     log_rmse = math.sqrt(float(np.sum(w * log_res**2)) / max(float(np.sum(w)), 1e-300))
     worst_idx = np.argsort(-np.max(np.abs(diff), axis=1))[:N_WORST]
@@ -231,6 +239,7 @@ def fit_error(material: AnalyticMaterial, params: dict, f_ref: Callable, grid=ER
         )
     return {
         "nrmse": nrmse,
+        "nrmse_theta_le_70": nrmse_core,
         "rel_l1": rel_l1,
         "log_rmse": log_rmse,
         "max_abs_diff_f_cos": float(np.max(np.abs(diff))),

@@ -44,6 +44,7 @@ def _fit_extras(fit) -> dict:
             "note": "APPROXIMATION: analytic glTF material fitted to the kesbrdf model; not the measurement",
             "fit_error": {
                 "nrmse": e["nrmse"],
+                "nrmse_theta_le_70": e["nrmse_theta_le_70"],
                 "rel_l1": e["rel_l1"],
                 "log_rmse": e["log_rmse"],
                 "definition": e["definition"],

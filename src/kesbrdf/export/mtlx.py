@@ -63,7 +63,7 @@ def _doc_string(fit) -> str:
     return (
         f"APPROXIMATION of a kesbrdf extended-KES fabric model: {fit.material} fitted by robust least squares "
         f"(cosine-weighted log residuals over the hemisphere). Fit error: NRMSE {e['nrmse']:.4f}, "
-        f"relative L1 {e['rel_l1']:.4f}, log-RMSE {e['log_rmse']:.4f} over {e['n_pairs']} direction pairs. "
+        f"(theta <= 70 deg: {e['nrmse_theta_le_70']:.4f}), relative L1 {e['rel_l1']:.4f}, log-RMSE {e['log_rmse']:.4f} over {e['n_pairs']} direction pairs. "
         "Tangent = warp; anisotropy rotation counter-clockwise from the warp about the normal."
     )
 
