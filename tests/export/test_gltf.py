@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import shutil
 import subprocess
 from pathlib import Path
@@ -91,6 +93,8 @@ def test_khronos_gltf_validator_reports_no_errors_or_warnings(tmp_path, kes_mode
 #: energy compensation) and the fit itself is approximate (NRMSE ~0.15 here); measured
 #: relative image RMSE against the kesbrdf GLSL preview: 0.14. Bound with margin.
 THREEJS_REL_RMSE_TOL = 0.35
+#: a 90°-rotated anisotropy must be at least this much worse (measured ratio 2.1)
+ROTATED_RATIO_MIN = 1.4
 
 
 def test_threejs_gltfloader_renders_next_to_kesbrdf_preview(tmp_path, kes_model, fits):
@@ -104,10 +108,13 @@ def test_threejs_gltfloader_renders_next_to_kesbrdf_preview(tmp_path, kes_model,
         pytest.fail("viewer/node_modules/three is missing: run `make viewer`")
     fit = fits["gltf_pbr"]
     glb.export(kes_model, tmp_path / "f.glb", fit=fit)
+    # the same material with the anisotropy direction turned by 90°: must match worse
+    rotated = dataclasses.replace(fit, params=dict(fit.params, anisotropy_rotation=(fit.params["anisotropy_rotation"] + math.pi / 2) % math.pi))
+    glb.export(kes_model, tmp_path / "rotated.glb", fit=rotated)
     T = kes_model.table
     rgba = np.concatenate([T, np.zeros(T.shape[:2] + (1,))], -1)
     inp = {
-        "glb": str(tmp_path / "f.glb"),
+        "glbs": [str(tmp_path / "f.glb"), str(tmp_path / "rotated.glb")],
         "model": {
             "nPhi": int(T.shape[0]),
             "nGamma": int(T.shape[1]),
@@ -124,7 +131,7 @@ def test_threejs_gltfloader_renders_next_to_kesbrdf_preview(tmp_path, kes_model,
         cwd=VIEWER, capture_output=True, text=True, timeout=240,
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
-    out = json.loads((tmp_path / "out.json").read_text())
+    out, out_rotated = json.loads((tmp_path / "out.json").read_text())["results"]
     m, p = out["material"], fit.params
     assert m["type"] == "MeshPhysicalMaterial" and m["hasTangents"]
     assert m["anisotropy"] == pytest.approx(p["anisotropy_strength"], rel=1e-6)
@@ -134,3 +141,6 @@ def test_threejs_gltfloader_renders_next_to_kesbrdf_preview(tmp_path, kes_model,
     assert out["pixels"] > 0.5 * inp["size"] ** 2 * np.pi / 4 * 0.5  # lit half of the disc at least
     assert out["mean_gltf"] > 0 and out["mean_kes"] > 0
     assert out["rel_rmse"] < THREEJS_REL_RMSE_TOL, out["rel_rmse"]
+    # tangent convention, end to end through a real client: the highlight turned by 90°
+    # (measured 0.31 vs 0.14) is clearly further from the kesbrdf preview
+    assert out_rotated["rel_rmse"] > ROTATED_RATIO_MIN * out["rel_rmse"], (out_rotated["rel_rmse"], out["rel_rmse"])

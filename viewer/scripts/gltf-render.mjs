@@ -2,7 +2,7 @@
 // the kesbrdf GLSL preview (src/shaders/kes_brdf.glsl) of the same model, same light and
 // camera; print both linear images' statistics and their difference.
 //   node scripts/gltf-render.mjs IN.json OUT.json
-// IN.json: {"glb": "path.glb", "model": {"nPhi","nGamma","dGamma","table": [RGBA...], "body": [r,g,b]},
+// IN.json: {"glb": "path.glb" (or "glbs": [paths]: one result per file, in "results"), "model": {"nPhi","nGamma","dGamma","table": [RGBA...], "body": [r,g,b]},
 //           "light": [x,y,z] (fabric-independent world direction to the light), "size": 96}
 // OUT.json: {"material": {...GLTFLoader's MeshPhysicalMaterial fields}, "rel_rmse", "pixels",
 //            "mean_gltf", "mean_kes", "gltf": [...], "kes": [...]}  (images: linear RGB, row-major)
@@ -21,7 +21,7 @@ const ORIGIN = 'http://kesbrdf.invalid';
 
 const [inPath, outPath] = process.argv.slice(2);
 const input = JSON.parse(fs.readFileSync(inPath, 'utf-8'));
-const glb = fs.readFileSync(input.glb).toString('base64');
+const glbPaths = input.glbs ?? [input.glb];
 const kesGlsl = fs.readFileSync(path.join(VIEWER, 'src', 'shaders', 'kes_brdf.glsl'), 'utf-8');
 
 const PAGE = `<!doctype html><html><head><script type="importmap">
@@ -47,6 +47,9 @@ try {
   });
   await page.goto(`${ORIGIN}/`);
   await page.waitForFunction(() => window.__ready === true, null, { timeout: 60000 });
+  const results = [];
+  for (const glbPath of glbPaths) {
+  const glb = fs.readFileSync(glbPath).toString('base64');
   const result = await page.evaluate(async ({ glb, inp, kesGlsl }) => {
     const THREE = window.__three;
     const bytes = Uint8Array.from(atob(glb), (c) => c.charCodeAt(0));
@@ -149,8 +152,10 @@ try {
     return { material, rel_rmse: Math.sqrt(se / Math.max(sr, 1e-30)), pixels: count,
              mean_gltf: sum1 / Math.max(3 * count, 1), mean_kes: sum2 / Math.max(3 * count, 1), size: N, gltf: g, kes: k };
   }, { glb, inp: input, kesGlsl });
+  results.push(result);
+  }
   if (errors.length) throw new Error(errors.join('\n'));
-  fs.writeFileSync(outPath, JSON.stringify(result));
+  fs.writeFileSync(outPath, JSON.stringify(input.glbs ? { results } : results[0]));
 } finally {
   await ctx.close();
   fs.rmSync(profile, { recursive: true, force: true });
