@@ -34,7 +34,7 @@ demo: venv
 
 # The suite includes the doctests of src/kesbrdf (tests/test_doctests.py) and a few
 # thousand fuzz examples per reader (tests/fuzz).
-test: venv
+test: venv $(if $(shell command -v npm 2>/dev/null),viewer)
 	$(PY) -m pytest -q
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
 

@@ -17,4 +17,9 @@ FORMATS: dict[str, str] = {
     "rgl-bsdf": "rgl_bsdf",
     "rgl-bsdf-spectral": "rgl_bsdf_spectral",
     "mitsuba-scene": "mitsuba_scene",
+    "gltf": "gltf",
+    "glb": "glb",
+    "mtlx": "mtlx",
+    "usd": "usd",
+    "brdf-explorer": "brdf_explorer",
 }

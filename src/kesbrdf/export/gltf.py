@@ -1,0 +1,183 @@
+"""glTF 2.0 export (formats ``gltf`` and ``glb``): the fitted material on preview meshes.
+
+The file holds one material (core metallic-roughness plus ``KHR_materials_anisotropy``,
+``KHR_materials_sheen`` and ``KHR_materials_specular``, fitted by
+:func:`kesbrdf.export.analytic_fit.fit_analytic` against
+:class:`kesbrdf.export.gltf_pbr.GltfPbr`), used by two meshes with NORMAL, TANGENT
+(along the warp, w = +1) and TEXCOORD_0: a swatch and a sphere
+(:mod:`kesbrdf.export.preview_mesh`), side by side in one scene.  The fit error
+(NRMSE, relative L1, worst configurations) is written in ``material.extras.kesbrdf``
+so nobody mistakes the approximation for the measurement.
+
+``.gltf`` embeds the buffer as a base64 data URI (one self-contained file);
+``.glb`` is the binary container.  Written with ``pygltflib``.
+"""
+
+from __future__ import annotations
+
+import base64
+from pathlib import Path
+
+import numpy as np
+
+from kesbrdf._atomic import atomic_path
+from kesbrdf.errors import KesbrdfError
+
+__all__ = ["export", "build_gltf", "OPEN_WITH"]
+
+OPEN_WITH = (
+    "any glTF 2.0 viewer with KHR_materials_anisotropy/sheen/specular: Khronos glTF Sample Viewer "
+    "(github.khronos.org/glTF-Sample-Viewer-Release, drag and drop), three.js GLTFLoader, "
+    "Blender (File > Import > glTF 2.0), Babylon.js Sandbox"
+)
+
+_ARRAY_BUFFER = 34962
+_ELEMENT_ARRAY_BUFFER = 34963
+_FLOAT = 5126
+_UNSIGNED_INT = 5125
+
+
+def _fit_extras(fit) -> dict:
+    e = fit.error
+    return {
+        "kesbrdf": {
+            "note": "APPROXIMATION: analytic glTF material fitted to the kesbrdf model; not the measurement",
+            "fit_error": {
+                "nrmse": e["nrmse"],
+                "nrmse_theta_le_70": e["nrmse_theta_le_70"],
+                "rel_l1": e["rel_l1"],
+                "log_rmse": e["log_rmse"],
+                "definition": e["definition"],
+                "worst": e["worst"],
+            },
+            "weighting": fit.weighting,
+            "grid": fit.grid,
+            "basins": fit.basins,
+            "tangent_convention": "TANGENT = warp (fabric x), bitangent = NORMAL x TANGENT = weft (w = +1); "
+            "anisotropyRotation counter-clockwise from the warp about the normal",
+        }
+    }
+
+
+def build_gltf(fit, meshes, model_info: dict | None = None):
+    """A ``pygltflib.GLTF2`` with the fitted material on ``meshes`` (one node each)."""
+    import pygltflib as g
+
+    from kesbrdf.export.gltf_pbr import EXTENSIONS, material_json
+
+    blob = bytearray()
+    buffer_views, accessors = [], []
+
+    def add(array, target, kind, component, minmax=False):
+        array = np.ascontiguousarray(array)
+        offset = len(blob)
+        blob.extend(array.tobytes())
+        blob.extend(b"\0" * (-len(blob) % 4))
+        buffer_views.append(g.BufferView(buffer=0, byteOffset=offset, byteLength=array.nbytes, target=target))
+        acc = g.Accessor(bufferView=len(buffer_views) - 1, componentType=component, count=array.shape[0], type=kind)
+        if minmax:
+            acc.min = [float(a) for a in array.min(axis=0)]
+            acc.max = [float(a) for a in array.max(axis=0)]
+        accessors.append(acc)
+        return len(accessors) - 1
+
+    gl_meshes, nodes = [], []
+    offsets = np.linspace(-0.75, 0.75, len(meshes)) if len(meshes) > 1 else [0.0]
+    for k, m in enumerate(meshes):
+        attrs = g.Attributes(
+            POSITION=add(m.positions, _ARRAY_BUFFER, "VEC3", _FLOAT, minmax=True),
+            NORMAL=add(m.normals, _ARRAY_BUFFER, "VEC3", _FLOAT),
+            TANGENT=add(m.tangents, _ARRAY_BUFFER, "VEC4", _FLOAT),
+            TEXCOORD_0=add(m.uvs, _ARRAY_BUFFER, "VEC2", _FLOAT),
+        )
+        indices = add(m.indices, _ELEMENT_ARRAY_BUFFER, "SCALAR", _UNSIGNED_INT)
+        gl_meshes.append(g.Mesh(name=m.name, primitives=[g.Primitive(attributes=attrs, indices=indices, material=0)]))
+        nodes.append(g.Node(name=m.name, mesh=k, translation=[float(offsets[k]), 0.0, 0.0]))
+    extras = _fit_extras(fit)
+    if model_info:
+        extras["kesbrdf"]["model"] = model_info
+    material = g.Material(**_material_kwargs(material_json(fit.params, extras=extras)))
+    gltf = g.GLTF2(
+        asset=g.Asset(version="2.0", generator="kesbrdf export"),
+        scene=0,
+        scenes=[g.Scene(name="kesbrdf preview", nodes=list(range(len(nodes))))],
+        nodes=nodes,
+        meshes=gl_meshes,
+        materials=[material],
+        accessors=accessors,
+        bufferViews=buffer_views,
+        buffers=[g.Buffer(byteLength=len(blob))],
+        extensionsUsed=list(EXTENSIONS),
+    )
+    return gltf, bytes(blob)
+
+
+def _material_kwargs(mj: dict) -> dict:
+    import pygltflib as g
+
+    pbr = mj["pbrMetallicRoughness"]
+    return {
+        "name": mj["name"],
+        "pbrMetallicRoughness": g.PbrMetallicRoughness(
+            baseColorFactor=pbr["baseColorFactor"], metallicFactor=pbr["metallicFactor"], roughnessFactor=pbr["roughnessFactor"]
+        ),
+        "extensions": mj["extensions"],
+        "extras": mj.get("extras", {}),
+    }
+
+
+def _model_info(model) -> dict:
+    info = {"kind": getattr(model, "kind", type(model).__name__)}
+    channels = getattr(model, "channels", None)
+    if channels is not None:
+        info["channels"] = list(channels)
+    return info
+
+
+def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, error_grid=None, **_ignored) -> dict:
+    """Write ``model``'s fitted glTF material on a swatch and a sphere to ``out``.
+
+    Parameters
+    ----------
+    model : Model or callable
+        Anything :func:`kesbrdf.export.analytic_fit.fit_analytic` accepts.
+    out : path
+        ``.gltf`` (JSON, embedded buffer) or ``.glb`` (binary); ``binary`` overrides.
+    fit : AnalyticFit, optional
+        A glTF fit already computed (the fit is the slow part; the CLI shares it).
+
+    Returns
+    -------
+    dict
+        ``paths``, ``size``, ``fit`` (params and error), ``fit_error`` (NRMSE), ``open_with``.
+    """
+    from kesbrdf.export.analytic_fit import ERROR_GRID, FIT_GRID, fit_analytic
+    from kesbrdf.export.gltf_pbr import GLTF_PBR
+    from kesbrdf.export.preview_mesh import swatch, uv_sphere
+
+    out = Path(out)
+    if binary is None:
+        if out.suffix.lower() not in (".gltf", ".glb"):
+            raise KesbrdfError(f"glTF export: expected an output ending in .gltf or .glb, got {out.name!r}")
+        binary = out.suffix.lower() == ".glb"
+    if fit is None:
+        fit = fit_analytic(GLTF_PBR, model, grid=fit_grid or FIT_GRID, error_grid=error_grid or ERROR_GRID)
+    elif fit.material != GLTF_PBR.name:
+        raise KesbrdfError(f"glTF export: expected a {GLTF_PBR.name!r} fit, got {fit.material!r}")
+    gltf, blob = build_gltf(fit, [swatch(1.0), uv_sphere(0.5)], _model_info(model))
+    with atomic_path(out) as tmp:
+        if binary:
+            gltf.set_binary_blob(blob)
+            gltf.save_binary(str(tmp))
+        else:
+            gltf.buffers[0].uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
+            gltf.save_json(str(tmp))
+    return {
+        "format": "glb" if binary else "gltf",
+        "paths": [str(out)],
+        "size": out.stat().st_size,
+        "fit": fit.as_dict(),
+        "fit_error": {"nrmse": fit.error["nrmse"], "rel_l1": fit.error["rel_l1"]},
+        "exact": False,
+        "open_with": OPEN_WITH,
+    }

@@ -1,0 +1,29 @@
+"""Shared fixtures of the export tests: one small KES model and its (cheap) analytic fits."""
+
+from __future__ import annotations
+
+import pytest
+
+#: small fit grids: the export tests check files, not fit quality (test_analytic_fit does)
+TEST_FIT_GRID = ((4, 8), (6, 12))
+
+
+@pytest.fixture(scope="session")
+def kes_model():
+    """A KES model fitted to a simulated anisotropic Ward fabric (RGB)."""
+    from kesbrdf.gonio import measure
+    from kesbrdf.model import fit
+    from kesbrdf.references.ward import AnisotropicWard
+
+    return fit(measure(AnisotropicWard(0.1, 0.25, rho_d=[0.3, 0.2, 0.1], rho_s=0.08)))
+
+
+@pytest.fixture(scope="session")
+def fits(kes_model):
+    """glTF, OpenPBR and Standard Surface fits of :func:`kes_model` on the small grid."""
+    from kesbrdf.export.analytic_fit import fit_analytic
+    from kesbrdf.export.gltf_pbr import GLTF_PBR
+    from kesbrdf.export.openpbr import OPENPBR
+    from kesbrdf.export.standard_surface import STANDARD_SURFACE
+
+    return {m.name: fit_analytic(m, kes_model, grid=TEST_FIT_GRID, error_grid=TEST_FIT_GRID) for m in (GLTF_PBR, OPENPBR, STANDARD_SURFACE)}
