@@ -1,0 +1,330 @@
+"""Scheduling a batch: Dask distributed (local cluster or an existing one), or serial.
+
+* ``workers=0``: every fabric runs in this process, one after the other (the serial
+  baseline; also handy under a debugger).
+* no ``scheduler``: a :class:`distributed.LocalCluster` of ``workers`` worker
+  *processes* (one thread each) bound to 127.0.0.1, no dashboard unless asked for
+  (then on 127.0.0.1 only).  Worker processes are **spawned**, never forked: a process
+  that has run Dr.Jit cannot be forked safely (files silently missing, hangs; see
+  docs/batch.md).  Workers get a node-local Dr.Jit kernel cache (``DRJIT_CACHE_DIR``
+  under the node's temp folder), a Dr.Jit thread count of cores // workers, and
+  single-threaded BLAS, so k workers never oversubscribe the cores.  When Mitsuba and
+  libLLVM are present every worker advertises the resource ``render=1``.
+* ``scheduler="tcp://host:port"`` (or a ``distributed.Client``): an existing cluster
+  (dask-jobqueue, the Kubernetes operator, ``dask scheduler`` + ``dask worker``).  A
+  worker plugin sets the same environment on every worker; render workers must be
+  started with ``--resources render=1``.
+
+One task per fabric runs the non-render steps (:func:`kesbrdf.batch.runner.run_fabric`);
+the preview step is a second task that asks for ``resources={"render": 1}``.  Tasks
+raising anything but a fabric error are retried ``retries`` times by Dask; a task
+whose workers keep dying (``KilledWorker``) is resubmitted up to ``retries`` times.
+Every retry is cheap and safe because finished steps are skipped by their manifests.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import logging
+import os
+import tempfile
+import time
+import uuid
+from dataclasses import dataclass, field
+
+from kesbrdf.batch.catalog import Fabric, read_catalog
+from kesbrdf.batch.runner import PERMANENT_ERRORS, run_fabric
+from kesbrdf.batch.steps import RENDER_STEPS, closure
+from kesbrdf.batch.store import Store
+from kesbrdf.errors import KesbrdfError
+
+__all__ = ["run_batch", "BatchResult", "DEFAULT_STEPS", "start_local_cluster", "render_available", "worker_env"]
+
+DEFAULT_STEPS = ("ingest", "fit", "validate", "report", "export", "preview")
+
+
+@dataclass
+class BatchResult:
+    """What :func:`run_batch` did."""
+
+    out: str
+    records: list
+    counts: dict
+    seconds: float
+    summary: dict = field(default_factory=dict)
+    notes: list = field(default_factory=list)
+    dashboard: str | None = None
+    workers: int = 0
+
+
+def render_available() -> bool:
+    """Mitsuba installed and a libLLVM found (checked without importing Dr.Jit)."""
+    from kesbrdf._drjit import LLVM_CANDIDATES
+
+    if importlib.util.find_spec("mitsuba") is None or importlib.util.find_spec("drjit") is None:
+        return False
+    llvm = os.environ.get("DRJIT_LIBLLVM_PATH")
+    return bool(llvm and os.path.exists(llvm)) or any(os.path.exists(p) for p in LLVM_CANDIDATES)
+
+
+def worker_env(n_workers: int, cores: int | None = None) -> dict:
+    """Environment for worker processes on one node (no oversubscription, local caches)."""
+    from kesbrdf._drjit import LLVM_CANDIDATES
+
+    cores = cores or os.cpu_count() or 1
+    env = {
+        "DRJIT_CACHE_DIR": os.path.join(tempfile.gettempdir(), f"kesbrdf-drjit-{os.getuid()}"),
+        "KESBRDF_DRJIT_THREADS": str(max(1, cores // max(1, n_workers))),
+        "OMP_NUM_THREADS": "1",
+        "OPENBLAS_NUM_THREADS": "1",
+        "MKL_NUM_THREADS": "1",
+        "MPLBACKEND": "Agg",
+    }
+    llvm = os.environ.get("DRJIT_LIBLLVM_PATH") or next((p for p in LLVM_CANDIDATES if os.path.exists(p)), None)
+    if llvm:
+        env["DRJIT_LIBLLVM_PATH"] = llvm
+    return env
+
+
+def _worker_plugin(env: dict):
+    from distributed.diagnostics.plugin import WorkerPlugin
+
+    class KesbrdfWorkerSetup(WorkerPlugin):
+        """Set the batch environment on a worker before any task imports Dr.Jit."""
+
+        name = "kesbrdf-batch-setup"
+
+        def __init__(self, env):
+            self.env = dict(env)
+
+        def setup(self, worker):
+            for k, v in self.env.items():
+                if k == "DRJIT_CACHE_DIR":  # node-local: this worker's temp folder
+                    v = os.path.join(tempfile.gettempdir(), f"kesbrdf-drjit-{os.getuid()}")
+                if k == "KESBRDF_DRJIT_THREADS":
+                    continue  # set per node by whoever started the workers, else Dr.Jit's default
+                os.environ.setdefault(k, v)
+
+    return KesbrdfWorkerSetup(env)
+
+
+def start_local_cluster(n_workers: int, dashboard: bool | str = False, env: dict | None = None,
+                        render: bool | None = None):
+    """A loopback-only LocalCluster of spawned single-threaded worker processes."""
+    import dask
+    from distributed import LocalCluster
+
+    if render is None:
+        render = render_available()
+    dash = None
+    if dashboard:
+        dash = dashboard if isinstance(dashboard, str) else "127.0.0.1:0"
+        if not dash.startswith("127.0.0.1") and not dash.startswith("localhost"):
+            dash = f"127.0.0.1:{dash.rsplit(':', 1)[-1]}"
+    with dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}):
+        if dask.config.get("distributed.worker.multiprocessing-method") != "spawn":  # pragma: no cover
+            raise KesbrdfError("the batch needs spawned worker processes (Dr.Jit is not fork-safe)")
+        return LocalCluster(
+            n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+            dashboard_address=dash, resources={"render": 1} if render else None,
+            env={**worker_env(n_workers), **(env or {})}, silence_logs=logging.ERROR,
+        )
+
+
+def _task(fabric, out_url, storage_options, steps, settings):
+    return run_fabric(fabric, Store(out_url, storage_options), steps, settings)
+
+
+def _transient_record(fabric: Fabric, exc: BaseException, step: str) -> dict:
+    msg = " ".join(f"{type(exc).__name__}: {exc}".split())
+    return {"id": fabric.id, "input": fabric.input, "status": "failed", "failed_step": step,
+            "error": f"transient failure persisted after retries: {msg}", "steps": {}}
+
+
+def _merge(core: dict, preview: dict | None) -> dict:
+    if preview is None:
+        return core
+    for s in RENDER_STEPS:
+        if s in preview.get("steps", {}):
+            core["steps"][s] = preview["steps"][s]
+    if preview.get("status") == "failed" and core.get("status") != "failed":
+        core.update(status="failed", error=preview.get("error"), failed_step=preview.get("failed_step"))
+    core["seconds"] = core.get("seconds", 0.0) + preview.get("seconds", 0.0)
+    return core
+
+
+def _classify(rec: dict) -> str:
+    if rec["status"] == "failed":
+        return "failed"
+    statuses = [s["status"] for s in rec["steps"].values()]
+    return "skipped" if statuses and all(s in ("skipped", "unavailable") for s in statuses) else "done"
+
+
+def _preview_possible(rec: dict) -> bool:
+    return rec["status"] != "failed" or rec["steps"].get("fit", {}).get("status") in ("done", "skipped")
+
+
+def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, scheduler=None, retries: int = 2,
+              dashboard: bool | str = False, progress=None, storage_options: dict | None = None,
+              settings: dict | None = None, worker_env_extra: dict | None = None,
+              write_summary: bool = True) -> BatchResult:
+    """Process every fabric of ``catalog`` into ``out`` (see the module docstring).
+
+    Parameters
+    ----------
+    catalog : path, URL, or list of Fabric
+        A catalogue CSV or folder (:func:`kesbrdf.batch.catalog.read_catalog`).
+    out : path or fsspec URL
+        Output root; each fabric writes ``out/<id>/<step>/``.
+    steps : iterable of str
+        Steps to run; the steps they need are added (:func:`kesbrdf.batch.steps.closure`).
+    workers : int, optional
+        Size of the local cluster (default: the number of cores); 0 runs serially here.
+    scheduler : str or distributed.Client, optional
+        Use an existing cluster instead of starting one.
+    retries : int
+        Retries of a task that failed for a reason other than its input.
+    progress : callable(event: dict), optional
+        Called with ``{"event": "start", "total", "dashboard", "workers"}`` and, per
+        finished fabric, ``{"event": "fabric", "record", "counts"}``.
+    settings : dict, optional
+        Batch-wide step settings, e.g. ``{"preview": {"spp": 8}}``.
+
+    Returns
+    -------
+    BatchResult
+    """
+    t0 = time.perf_counter()
+    steps = tuple(steps)
+    all_steps = closure(steps)
+    fabrics = list(catalog) if isinstance(catalog, (list, tuple)) else read_catalog(catalog, storage_options)
+    store = Store(out, storage_options)
+    settings = dict(settings or {})
+    core_steps = tuple(s for s in all_steps if s not in RENDER_STEPS)
+    want_render = any(s in all_steps for s in RENDER_STEPS)
+    counts = {"done": 0, "failed": 0, "skipped": 0, "total": len(fabrics)}
+    notes: list[str] = []
+    records: dict[str, dict] = {}
+
+    def finish(rec):
+        counts[_classify(rec)] += 1
+        records[rec["id"]] = rec
+        if progress:
+            progress({"event": "fabric", "record": rec, "counts": dict(counts)})
+
+    if workers is None:
+        workers = os.cpu_count() or 1
+    dash_link = None
+    if scheduler is None and workers == 0:
+        if progress:
+            progress({"event": "start", "total": len(fabrics), "dashboard": None, "workers": 0})
+        for fab in fabrics:
+            rec = None
+            for attempt in range(retries + 1):
+                try:
+                    rec = run_fabric(fab, store, all_steps, settings)
+                    break
+                except PERMANENT_ERRORS:  # pragma: no cover - run_fabric catches them
+                    raise
+                except Exception as exc:
+                    if attempt == retries:
+                        rec = _transient_record(fab, exc, "?")
+            finish(rec)
+        n_workers = 0
+    else:
+        n_workers, dash_link, render_ok = _run_dask(fabrics, store, storage_options, core_steps, all_steps,
+                                                    want_render, settings, workers, scheduler, retries,
+                                                    dashboard, worker_env_extra, progress, finish, notes)
+    store.sweep([f.id for f in fabrics])
+    ordered = [records[f.id] for f in fabrics]
+    result = BatchResult(out=store.display(), records=ordered, counts=counts, seconds=time.perf_counter() - t0,
+                         notes=notes, dashboard=dash_link, workers=n_workers)
+    if write_summary:
+        from kesbrdf.batch.summary import write_summary as _write
+
+        result.summary = _write(store, ordered, all_steps, {f.id: f.meta for f in fabrics})
+    return result
+
+
+def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render, settings, workers, scheduler,
+              retries, dashboard, env_extra, progress, finish, notes):
+    from distributed import Client, as_completed
+
+    cluster = None
+    own_client = True
+    if scheduler is None:
+        cluster = start_local_cluster(workers, dashboard=dashboard, env=env_extra)
+        client = Client(cluster)
+    elif isinstance(scheduler, str):
+        client = Client(scheduler)
+    else:
+        client, own_client = scheduler, False
+    try:
+        info = client.scheduler_info()
+        n_workers = len(info.get("workers", {}))
+        render_ok = any((w.get("resources") or {}).get("render") for w in info.get("workers", {}).values())
+        try:
+            client.register_plugin(_worker_plugin(worker_env(max(1, n_workers))))
+        except AttributeError:  # pragma: no cover - older distributed
+            client.register_worker_plugin(_worker_plugin(worker_env(max(1, n_workers))))
+        dash_link = client.dashboard_link if dashboard else None
+        if want_render and not render_ok:
+            notes.append("preview skipped: no worker has the 'render' resource (Mitsuba + libLLVM)")
+        if progress:
+            progress({"event": "start", "total": len(fabrics), "dashboard": dash_link, "workers": n_workers})
+        token = uuid.uuid4().hex[:8]
+        by_key: dict[str, tuple] = {}
+        attempts: dict[str, int] = {}
+        core: dict[str, dict] = {}
+        ac = as_completed()
+
+        def submit(fab, kind):
+            n = attempts.get(f"{kind}:{fab.id}", 0)
+            attempts[f"{kind}:{fab.id}"] = n + 1
+            key = f"kesbrdf-{kind}-{fab.id}-{token}-{n}"
+            if kind == "core":
+                fut = client.submit(_task, fab, store.url, storage_options, core_steps, settings, key=key,
+                                    retries=retries, pure=False)
+            else:
+                fut = client.submit(_task, fab, store.url, storage_options, all_steps_render, settings, key=key,
+                                    retries=retries, pure=False, resources={"render": 1})
+            by_key[fut.key] = (fab, kind)
+            ac.add(fut)
+
+        all_steps_render = tuple(s for s in all_steps if s in RENDER_STEPS)
+        for fab in fabrics:
+            submit(fab, "core")
+        for fut in ac:
+            fab, kind = by_key.pop(fut.key)
+            try:
+                rec = fut.result()
+            except PERMANENT_ERRORS:  # pragma: no cover - run_fabric catches them
+                raise
+            except Exception as exc:  # retries exhausted, or KilledWorker
+                from distributed import KilledWorker
+
+                if isinstance(exc, KilledWorker) and attempts[f"{kind}:{fab.id}"] <= retries:
+                    submit(fab, kind)
+                    continue
+                rec = _transient_record(fab, exc, "preview" if kind == "render" else "core")
+            finally:
+                fut.release()
+            if kind == "core":
+                if want_render and render_ok and _preview_possible(rec):
+                    core[fab.id] = rec
+                    submit(fab, "render")
+                    continue
+                if want_render:
+                    for s in RENDER_STEPS:
+                        if s in all_steps:
+                            rec["steps"][s] = {"status": "unavailable" if not render_ok else "blocked",
+                                               "seconds": 0.0, "result": {}, "outputs": {}}
+                finish(rec)
+            else:
+                finish(_merge(core.pop(fab.id), rec))
+        return n_workers, dash_link, render_ok
+    finally:
+        if own_client:
+            client.close()
+        if cluster is not None:
+            cluster.close()
