@@ -78,6 +78,13 @@ def _test_hooks(step: str, fabric: str) -> None:
             raise RuntimeError(f"injected transient failure in {fabric}/{step} (test hook)")
 
 
+def _source_name(fabric: Fabric) -> str:
+    """How downstream steps name the measurement: the catalogue input (a manifest's
+    measurement is marked as ingested from it)."""
+    src = fabric.input
+    return f"{src} (ingested)" if src.endswith("manifest.csv") else src
+
+
 class _Input:
     """The catalogue input, made local (downloaded when it is a URL)."""
 
@@ -142,7 +149,7 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
                           _sha256_file(p) for p in files}
                 local_inputs = {"input": files[0]}
             else:
-                inputs, local_inputs = {}, {}
+                inputs, local_inputs = {}, {"source": _source_name(fabric)}
                 for d in DEPENDS[step]:
                     dirpath = store.local_dir(fabric.id, d)
                     for name, digest in manifests[d]["outputs"].items():

@@ -182,9 +182,16 @@ def step_ingest(inputs: dict, params: dict, out: Path) -> dict:
 
 
 def _read_m(inputs):
-    from kesbrdf.io.measurement_csv import read_measurement
+    """The ingested measurement, named after the catalogue input (not the output folder,
+    so a model does not depend on where OUT is; for a CSV input the bytes and line
+    numbers are the input's own)."""
+    import hashlib
 
-    return read_measurement(inputs["ingest/measurement.csv"])
+    from kesbrdf.io.measurement_csv import parse_measurement
+
+    data = Path(inputs["ingest/measurement.csv"]).read_bytes()
+    name = inputs.get("source") or "ingest/measurement.csv"
+    return parse_measurement(data.decode("utf-8-sig"), source=str(name), sha256=hashlib.sha256(data).hexdigest())
 
 
 def _load_model(inputs):

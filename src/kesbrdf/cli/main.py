@@ -35,6 +35,7 @@ COMMANDS: dict[str, str] = {
     "colourways": "colourways",
     "view": "view",
     "demo": "demo",
+    "batch": "batch",
 }
 
 EXIT_USER_ERROR = 2
