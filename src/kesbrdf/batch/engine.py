@@ -15,11 +15,14 @@
   worker plugin sets the same environment on every worker; render workers must be
   started with ``--resources render=1``.
 
-One task per fabric runs the non-render steps (:func:`kesbrdf.batch.runner.run_fabric`);
-the preview step is a second task that asks for ``resources={"render": 1}``.  Tasks
-raising anything but a fabric error are retried ``retries`` times by Dask; a task
-whose workers keep dying (``KilledWorker``) is resubmitted up to ``retries`` times.
-Every retry is cheap and safe because finished steps are skipped by their manifests.
+One core task runs the non-render steps of a few fabrics (:func:`auto_chunk`: about
+four tasks per worker, at most 16 fabrics, which amortises Dask's per-task cost;
+:func:`kesbrdf.batch.runner.run_chunk`); the preview step is one task per fabric that
+asks for ``resources={"render": 1}``.  Retries are counted per fabric by this driver:
+a fabric whose step raised anything but a fabric error, or whose task's workers kept
+dying (``KilledWorker``, after Dask's own rescheduling), is resubmitted alone up to
+``retries`` times.  Every retry is cheap and safe because finished steps are skipped
+by their manifests.
 """
 
 from __future__ import annotations
@@ -33,7 +36,7 @@ import uuid
 from dataclasses import dataclass, field
 
 from kesbrdf.batch.catalog import Fabric, read_catalog
-from kesbrdf.batch.runner import PERMANENT_ERRORS, run_fabric
+from kesbrdf.batch.runner import run_chunk
 from kesbrdf.batch.steps import RENDER_STEPS, closure
 from kesbrdf.batch.store import Store
 from kesbrdf.errors import KesbrdfError
@@ -41,6 +44,8 @@ from kesbrdf.errors import KesbrdfError
 __all__ = ["run_batch", "BatchResult", "DEFAULT_STEPS", "start_local_cluster", "render_available", "worker_env"]
 
 DEFAULT_STEPS = ("ingest", "fit", "validate", "report", "export", "preview")
+#: Largest number of fabrics in one core task (:func:`auto_chunk`).
+MAX_CHUNK = 16
 
 
 @dataclass
@@ -131,14 +136,14 @@ def start_local_cluster(n_workers: int, dashboard: bool | str = False, env: dict
         )
 
 
-def _task(fabric, out_url, storage_options, steps, settings):
-    return run_fabric(fabric, Store(out_url, storage_options), steps, settings)
-
-
-def _transient_record(fabric: Fabric, exc: BaseException, step: str) -> dict:
-    msg = " ".join(f"{type(exc).__name__}: {exc}".split())
+def _transient_record(fabric: Fabric, error: str, step: str, attempts: int) -> dict:
     return {"id": fabric.id, "input": fabric.input, "status": "failed", "failed_step": step,
-            "error": f"transient failure persisted after retries: {msg}", "steps": {}}
+            "error": f"transient failure persisted after {attempts} attempt(s): {error}", "steps": {}}
+
+
+def auto_chunk(n_fabrics: int, n_workers: int) -> int:
+    """Fabrics per task: about 4 tasks per worker, at most :data:`MAX_CHUNK`."""
+    return max(1, min(MAX_CHUNK, n_fabrics // (4 * max(1, n_workers))))
 
 
 def _merge(core: dict, preview: dict | None) -> dict:
@@ -167,7 +172,7 @@ def _preview_possible(rec: dict) -> bool:
 def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, scheduler=None, retries: int = 2,
               dashboard: bool | str = False, progress=None, storage_options: dict | None = None,
               settings: dict | None = None, worker_env_extra: dict | None = None,
-              write_summary: bool = True) -> BatchResult:
+              write_summary: bool = True, chunk: int | None = None) -> BatchResult:
     """Process every fabric of ``catalog`` into ``out`` (see the module docstring).
 
     Parameters
@@ -189,6 +194,8 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
         finished fabric, ``{"event": "fabric", "record", "counts"}``.
     settings : dict, optional
         Batch-wide step settings, e.g. ``{"preview": {"spp": 8}}``.
+    chunk : int, optional
+        Fabrics per core task (default :func:`auto_chunk`); renders are one per task.
 
     Returns
     -------
@@ -219,22 +226,18 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
         if progress:
             progress({"event": "start", "total": len(fabrics), "dashboard": None, "workers": 0})
         for fab in fabrics:
-            rec = None
-            for attempt in range(retries + 1):
-                try:
-                    rec = run_fabric(fab, store, all_steps, settings)
+            for attempt in range(1, retries + 2):
+                rec = run_chunk([fab], store.url, storage_options, all_steps, settings)[0]
+                if rec["status"] != "transient":
                     break
-                except PERMANENT_ERRORS:  # pragma: no cover - run_fabric catches them
-                    raise
-                except Exception as exc:
-                    if attempt == retries:
-                        rec = _transient_record(fab, exc, "?")
+            if rec["status"] == "transient":
+                rec = _transient_record(fab, rec["error"], "?", attempt)
             finish(rec)
         n_workers = 0
     else:
-        n_workers, dash_link, render_ok = _run_dask(fabrics, store, storage_options, core_steps, all_steps,
-                                                    want_render, settings, workers, scheduler, retries,
-                                                    dashboard, worker_env_extra, progress, finish, notes)
+        n_workers, dash_link = _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render,
+                                         settings, workers, scheduler, retries, dashboard, worker_env_extra,
+                                         progress, finish, notes, chunk)
     store.sweep([f.id for f in fabrics])
     ordered = [records[f.id] for f in fabrics]
     result = BatchResult(out=store.display(), records=ordered, counts=counts, seconds=time.perf_counter() - t0,
@@ -247,8 +250,8 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
 
 
 def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render, settings, workers, scheduler,
-              retries, dashboard, env_extra, progress, finish, notes):
-    from distributed import Client, as_completed
+              retries, dashboard, env_extra, progress, finish, notes, chunk):
+    from distributed import Client, KilledWorker, as_completed
 
     cluster = None
     own_client = True
@@ -272,57 +275,67 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
             notes.append("preview skipped: no worker has the 'render' resource (Mitsuba + libLLVM)")
         if progress:
             progress({"event": "start", "total": len(fabrics), "dashboard": dash_link, "workers": n_workers})
+        render_steps = tuple(s for s in all_steps if s in RENDER_STEPS)
+        size = chunk or auto_chunk(len(fabrics), n_workers)
         token = uuid.uuid4().hex[:8]
         by_key: dict[str, tuple] = {}
-        attempts: dict[str, int] = {}
+        attempts: dict[tuple, int] = {}
         core: dict[str, dict] = {}
         ac = as_completed()
+        counter = [0]
 
-        def submit(fab, kind):
-            n = attempts.get(f"{kind}:{fab.id}", 0)
-            attempts[f"{kind}:{fab.id}"] = n + 1
-            key = f"kesbrdf-{kind}-{fab.id}-{token}-{n}"
-            if kind == "core":
-                fut = client.submit(_task, fab, store.url, storage_options, core_steps, settings, key=key,
-                                    retries=retries, pure=False)
-            else:
-                fut = client.submit(_task, fab, store.url, storage_options, all_steps_render, settings, key=key,
-                                    retries=retries, pure=False, resources={"render": 1})
-            by_key[fut.key] = (fab, kind)
+        def submit(group, kind):
+            for fab in group:
+                attempts[(kind, fab.id)] = attempts.get((kind, fab.id), 0) + 1
+            counter[0] += 1
+            key = f"kesbrdf-{kind}-{group[0].id}-{token}-{counter[0]}"
+            steps = core_steps if kind == "core" else render_steps
+            extra = {} if kind == "core" else {"resources": {"render": 1}}
+            fut = client.submit(run_chunk, list(group), store.url, storage_options, steps, settings, key=key,
+                                pure=False, **extra)
+            by_key[fut.key] = (list(group), kind)
             ac.add(fut)
 
-        all_steps_render = tuple(s for s in all_steps if s in RENDER_STEPS)
-        for fab in fabrics:
-            submit(fab, "core")
-        for fut in ac:
-            fab, kind = by_key.pop(fut.key)
-            try:
-                rec = fut.result()
-            except PERMANENT_ERRORS:  # pragma: no cover - run_fabric catches them
-                raise
-            except Exception as exc:  # retries exhausted, or KilledWorker
-                from distributed import KilledWorker
+        def done_core(rec):
+            if want_render and render_ok and _preview_possible(rec):
+                core[rec["id"]] = rec
+                submit([fab_by_id[rec["id"]]], "render")
+                return
+            if want_render:
+                for s in render_steps:
+                    rec["steps"][s] = {"status": "unavailable" if not render_ok else "blocked",
+                                       "seconds": 0.0, "result": {}, "outputs": {}}
+            finish(rec)
 
-                if isinstance(exc, KilledWorker) and attempts[f"{kind}:{fab.id}"] <= retries:
-                    submit(fab, kind)
-                    continue
-                rec = _transient_record(fab, exc, "preview" if kind == "render" else "core")
+        fab_by_id = {f.id: f for f in fabrics}
+        for k in range(0, len(fabrics), size):
+            submit(fabrics[k:k + size], "core")
+        for fut in ac:
+            group, kind = by_key.pop(fut.key)
+            try:
+                recs = fut.result()
+            except KilledWorker as exc:  # its workers kept dying: resubmit, one fabric per task
+                recs = [{"id": f.id, "status": "transient", "error": f"KilledWorker: {exc}"} for f in group]
+            except Exception as exc:  # e.g. a fabric that cannot be sent to a worker
+                recs = [{"id": f.id, "status": "transient", "error": f"{type(exc).__name__}: {exc}"} for f in group]
             finally:
                 fut.release()
-            if kind == "core":
-                if want_render and render_ok and _preview_possible(rec):
-                    core[fab.id] = rec
-                    submit(fab, "render")
-                    continue
-                if want_render:
-                    for s in RENDER_STEPS:
-                        if s in all_steps:
-                            rec["steps"][s] = {"status": "unavailable" if not render_ok else "blocked",
-                                               "seconds": 0.0, "result": {}, "outputs": {}}
-                finish(rec)
-            else:
-                finish(_merge(core.pop(fab.id), rec))
-        return n_workers, dash_link, render_ok
+            again = []
+            for rec in recs:
+                fab = fab_by_id[rec["id"]]
+                if rec["status"] == "transient":
+                    n = attempts[(kind, fab.id)]
+                    if n <= retries:
+                        again.append(fab)
+                        continue
+                    rec = _transient_record(fab, rec["error"], "preview" if kind == "render" else "core", n)
+                if kind == "core":
+                    done_core(rec)
+                else:
+                    finish(_merge(core.pop(fab.id), rec))
+            for fab in again:
+                submit([fab], kind)
+        return n_workers, dash_link
     finally:
         if own_client:
             client.close()

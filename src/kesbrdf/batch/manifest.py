@@ -23,6 +23,7 @@ half-written folder.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from importlib import metadata
@@ -44,13 +45,18 @@ def _dist_version(name: str) -> str | None:
         return None
 
 
-def versions() -> dict:
-    """Versions recorded in every manifest (read from package metadata: no Mitsuba import)."""
+@functools.lru_cache(maxsize=1)
+def _versions() -> tuple:
     import numpy
 
     from kesbrdf._version import __version__
 
-    return {"kesbrdf": __version__, "numpy": numpy.__version__, "mitsuba": _dist_version("mitsuba")}
+    return (("kesbrdf", __version__), ("numpy", numpy.__version__), ("mitsuba", _dist_version("mitsuba")))
+
+
+def versions() -> dict:
+    """Versions recorded in every manifest (read from package metadata: no Mitsuba import)."""
+    return dict(_versions())
 
 
 def canonical_json(obj) -> str:

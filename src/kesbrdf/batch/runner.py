@@ -30,7 +30,7 @@ from kesbrdf.batch.steps import DEPENDS, STEP_FUNCTIONS, closure, input_files, s
 from kesbrdf.batch.store import Store, is_url
 from kesbrdf.errors import KesbrdfError
 
-__all__ = ["run_fabric", "PERMANENT_ERRORS", "TEST_HOOKS_ENV"]
+__all__ = ["run_fabric", "run_chunk", "PERMANENT_ERRORS", "TEST_HOOKS_ENV"]
 
 #: Exceptions that are the input's fault: reported, never retried.
 PERMANENT_ERRORS = (KesbrdfError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
@@ -188,3 +188,32 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
         entry["seconds"] = time.perf_counter() - t0
     record["seconds"] = time.perf_counter() - t_start
     return record
+
+
+_STORES: dict = {}
+
+
+def _store(url: str, storage_options: dict | None) -> Store:
+    """One Store per (URL, options) per process (building an fsspec file system costs ms)."""
+    key = (url, json.dumps(storage_options or {}, sort_keys=True, default=str))
+    if key not in _STORES:
+        _STORES[key] = Store(url, storage_options)
+    return _STORES[key]
+
+
+def run_chunk(fabrics, url: str, storage_options: dict | None, steps, settings: dict | None = None) -> list[dict]:
+    """:func:`run_fabric` for several fabrics (one Dask task amortises its overhead).
+
+    A transient exception of one fabric does not stop the others: its record gets
+    ``status="transient"`` and the error, and the driver resubmits that fabric while it
+    has retries left.  Finished steps are skipped on the retry, so nothing is redone.
+    """
+    store = _store(url, storage_options)
+    out = []
+    for fab in fabrics:
+        try:
+            out.append(run_fabric(fab, store, steps, settings))
+        except Exception as exc:  # anything but a fabric error: retried by the driver
+            out.append({"id": fab.id, "input": fab.input, "status": "transient", "failed_step": None,
+                        "error": " ".join(f"{type(exc).__name__}: {exc}".split()), "steps": {}})
+    return out
