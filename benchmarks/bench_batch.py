@@ -1,36 +1,33 @@
 """Batch throughput: fabrics per minute for fit + validate + export (ingest included).
 
-* ``serial``: :func:`kesbrdf.batch.runner.run_fabric` for every fabric, one after the
-  other in this process (no Dask): the same steps, manifests and files.
-* ``dask_1`` / ``dask_2``: :func:`kesbrdf.batch.run_batch` on an already running
-  LocalCluster of 1 and 2 spawned worker processes (start-up timed separately).
+* ``serial``: every fabric one after the other in this process (``workers=0``, no
+  Dask): the same steps, manifests and files.
+* ``dask_1`` / ``dask_2``: :func:`kesbrdf.batch.run_batch` on already running
+  LocalClusters of 1 and 2 spawned worker processes (their start-up is timed apart).
 
-Scaling efficiency = (t_1 / t_2) / 2; per-task overhead = t_1 / t_serial − 1.  Every run
-writes into a fresh folder (a rerun would skip everything).  The fabrics are the
-synthetic library (Sadeghi presets, Ward, Ashikhmin–Shirley) as measurement CSVs.
+The three runs are interleaved ``REPEATS`` times and the best of each is kept, so slow
+drifts of the machine's load hit all three alike.  Every run writes into a fresh folder
+(a rerun would skip everything).
+
+Reported: fabrics per minute; scaling efficiency = (t_1 / t_2) / 2; overhead against
+serial = t_1 / t_serial − 1 (wall clock, sensitive to other load); and the
+*scheduling overhead* = (t_1 − Σ in-task seconds) / Σ in-task seconds, the share of the
+1-worker wall time not spent inside :func:`~kesbrdf.batch.runner.run_fabric` (what Dask
+adds per task: serialisation, scheduler round trips, result transfer), which does
+not depend on how fast the machine happens to be.
 """
 
 from __future__ import annotations
 
 import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
 
 N_FABRICS = 48
+REPEATS = 3
 STEPS = ("fit", "validate", "export")
-
-
-def _serial(fabrics, out):
-    from kesbrdf.batch.runner import run_fabric
-    from kesbrdf.batch.steps import closure
-    from kesbrdf.batch.store import Store
-
-    store = Store(out)
-    t0 = time.perf_counter()
-    for f in fabrics:
-        run_fabric(f, store, closure(STEPS))
-    return time.perf_counter() - t0
 
 
 def run() -> dict:
@@ -41,38 +38,53 @@ def run() -> dict:
     from kesbrdf.batch.library import simulate_library
 
     root = Path(tempfile.mkdtemp(prefix="kesbrdf-bench-batch-"))
-    catalog = simulate_library(N_FABRICS, root / "lib", seed=1, broken=0, images_every=0)
-    fabrics = read_catalog(catalog)
-    _serial(fabrics[:4], root / "warm")  # imports and first-call costs out of the timings
-    t_serial = min(_serial(fabrics, root / f"serial{k}") for k in range(2))
-    res = {"n_fabrics": N_FABRICS, "steps": list(STEPS), "cpus": os.cpu_count(),
-           "serial_s": t_serial, "serial_fabrics_per_min": N_FABRICS / t_serial * 60}
-    for n in (1, 2):
-        t0 = time.perf_counter()
-        cluster = start_local_cluster(n, render=False)
-        client = Client(cluster)
-        res[f"dask_{n}_startup_s"] = time.perf_counter() - t0
-        try:
-            run_batch(fabrics[:4], root / f"warm{n}", steps=STEPS, scheduler=client, write_summary=False)
-            times = []
-            for k in range(2):
+    fabrics = read_catalog(simulate_library(N_FABRICS, root / "lib", seed=1, broken=0, images_every=0))
+    res = {"n_fabrics": N_FABRICS, "steps": list(STEPS), "cpus": os.cpu_count(), "repeats": REPEATS}
+    clients, clusters = {}, []
+    try:
+        for n in (1, 2):
+            t0 = time.perf_counter()
+            cl = start_local_cluster(n, render=False)
+            clusters.append(cl)
+            clients[n] = Client(cl)
+            res[f"dask_{n}_startup_s"] = time.perf_counter() - t0
+        run_batch(fabrics[:4], root / "warm0", steps=STEPS, workers=0, write_summary=False)
+        for n, c in clients.items():
+            run_batch(fabrics[:4], root / f"warm{n}", steps=STEPS, scheduler=c, write_summary=False)
+        best = {"serial": (float("inf"), 0.0), 1: (float("inf"), 0.0), 2: (float("inf"), 0.0)}
+        for k in range(REPEATS):
+            for which in ("serial", 1, 2):
+                out = root / f"{which}_{k}"
                 t0 = time.perf_counter()
-                r = run_batch(fabrics, root / f"dask{n}_{k}", steps=STEPS, scheduler=client, write_summary=False)
-                times.append(time.perf_counter() - t0)
+                if which == "serial":
+                    r = run_batch(fabrics, out, steps=STEPS, workers=0, write_summary=False)
+                else:
+                    r = run_batch(fabrics, out, steps=STEPS, scheduler=clients[which], write_summary=False)
+                wall = time.perf_counter() - t0
                 assert r.counts["done"] == N_FABRICS, r.counts
-        finally:
-            client.close()
-            cluster.close()
-        res[f"dask_{n}_s"] = min(times)
-        res[f"dask_{n}_fabrics_per_min"] = N_FABRICS / min(times) * 60
-    res["scaling_efficiency_2"] = res["dask_1_s"] / res["dask_2_s"] / 2
-    res["overhead_vs_serial"] = res["dask_1_s"] / t_serial - 1
-    res["per_fabric_serial_ms"] = t_serial / N_FABRICS * 1e3
-    res["per_task_overhead_ms"] = (res["dask_1_s"] - t_serial) / N_FABRICS * 1e3
-    res["load_average_1min"] = os.getloadavg()[0]
-    import shutil
-
-    shutil.rmtree(root, ignore_errors=True)
+                inside = sum(rec["seconds"] for rec in r.records)
+                if wall < best[which][0]:
+                    best[which] = (wall, inside)
+                shutil.rmtree(out, ignore_errors=True)
+    finally:
+        for c in clients.values():
+            c.close()
+        for cl in clusters:
+            cl.close()
+        shutil.rmtree(root, ignore_errors=True)
+    t_s, t_1, t_2 = best["serial"][0], best[1][0], best[2][0]
+    res.update({
+        "serial_s": t_s, "dask_1_s": t_1, "dask_2_s": t_2,
+        "serial_fabrics_per_min": N_FABRICS / t_s * 60,
+        "dask_1_fabrics_per_min": N_FABRICS / t_1 * 60,
+        "dask_2_fabrics_per_min": N_FABRICS / t_2 * 60,
+        "scaling_efficiency_2": t_1 / t_2 / 2,
+        "overhead_vs_serial": t_1 / t_s - 1,
+        "scheduling_overhead": (t_1 - best[1][1]) / best[1][1],
+        "per_fabric_serial_ms": t_s / N_FABRICS * 1e3,
+        "per_fabric_scheduling_ms": (t_1 - best[1][1]) / N_FABRICS * 1e3,
+        "load_average_1min": os.getloadavg()[0],
+    })
     return res
 
 
