@@ -13,7 +13,7 @@ import os
 import signal
 import subprocess
 import sys
-import threading
+import tempfile
 import time
 from pathlib import Path
 
@@ -255,3 +255,67 @@ def test_preview_on_render_workers(cluster, library, tmp_path):
     img = np.asarray(Image.open(out / fab[0].id / "preview" / "preview.png").convert("RGB"), float)
     assert img.shape == (48, 64, 3) and img.std() > 5  # a lit sphere, not a blank frame
     assert "data:image/png;base64," in (out / "index.html").read_text()
+
+
+def test_export_step_runs_every_listed_format(library, tmp_path, monkeypatch):
+    """The export step iterates kesbrdf.export.FORMATS: none today, all after the merge."""
+    import kesbrdf.export as ex
+    from kesbrdf.batch import read_catalog, run_batch
+
+    mod = tmp_path / "mods" / "kesbrdf_test_formats" / "fake.py"  # FORMATS values with a dot are full module names
+    mod.parent.mkdir(parents=True)
+    (mod.parent / "__init__.py").write_text("")
+    mod.write_text(
+        "import json\nfrom pathlib import Path\nEXTENSIONS = ('.fake.json',)\n"
+        "class R:\n    def __init__(self, p): self.p = p\n"
+        "    def to_json(self): return {'format': 'fake', 'paths': [str(self.p)], 'agreement': {}}\n"
+        "def export(model, out, **options):\n"
+        "    Path(out).write_text(json.dumps({'channels': list(model.channels), 'shape': list(model.table.shape)}))\n"
+        "    return R(out)\n"
+    )
+    monkeypatch.syspath_prepend(str(mod.parent.parent))
+    fabrics = read_catalog(library)[:2]
+    out = tmp_path / "out"
+    monkeypatch.setattr(ex, "FORMATS", {})
+    first = run_batch(fabrics, out, steps=("export",), workers=0)
+    assert first.records[0]["steps"]["export"]["result"]["note"].startswith("no export formats installed")
+    monkeypatch.setattr(ex, "FORMATS", {"fake": "kesbrdf_test_formats.fake", "broken": "kesbrdf_no_such_module"})
+    second = run_batch(fabrics, out, steps=("export",), workers=0)
+    st = second.records[0]["steps"]
+    # a new format reruns export and nothing upstream
+    assert st["fit"]["status"] == "skipped" and st["export"]["status"] == "done"
+    doc = json.loads((out / fabrics[0].id / "export" / "model.fake.json").read_text())
+    assert doc["channels"] == ["R", "G", "B"] and len(doc["shape"]) == 3
+    assert "broken" in st["export"]["result"]["failed"]  # a missing module fails alone
+    row = next(csv.DictReader(open(out / "summary.csv")))
+    assert row["exports"] == f"{fabrics[0].id}/export/model.fake.json" and row["export_formats"] == "fake"
+    assert row["export_errors"].startswith("broken: ")
+
+
+def test_demo_batch_quick(tmp_path, cluster):
+    from kesbrdf.batch.demo import DEMO_BROKEN, DEMO_FABRICS, run_demo_batch
+
+    said = []
+    result = run_demo_batch(tmp_path, quick=True, progress=said.append, scheduler=cluster)
+    assert DEMO_FABRICS + DEMO_BROKEN >= 12 and DEMO_BROKEN == 2
+    assert result.counts["failed"] == 2 and result.counts["done"] == DEMO_FABRICS
+    assert (tmp_path / "results" / "index.html").is_file() and (tmp_path / "results" / "summary.parquet").is_file()
+    assert said and "2 failed (as intended)" in said[0]
+
+
+def test_local_cluster_is_loopback_spawned_and_sets_worker_environment(cluster):
+    import dask
+
+    info = cluster.scheduler_info()
+    assert info["address"].startswith("tcp://127.0.0.1:")
+    assert len(info["workers"]) == 2 and all(a.startswith("tcp://127.0.0.1:") for a in info["workers"])
+    assert dask.config.get("distributed.worker.multiprocessing-method") == "spawn"
+    env = cluster.run(lambda: {k: os.environ.get(k) for k in ("DRJIT_CACHE_DIR", "KESBRDF_DRJIT_THREADS",
+                                                              "OMP_NUM_THREADS")})
+    cores = os.cpu_count() or 1
+    for e in env.values():
+        assert e["DRJIT_CACHE_DIR"].startswith(tempfile.gettempdir())  # node-local, not $HOME or NFS
+        assert e["KESBRDF_DRJIT_THREADS"] == str(max(1, cores // 2)) and e["OMP_NUM_THREADS"] == "1"
+    # one thread per worker process, in separate processes
+    assert {w["nthreads"] for w in info["workers"].values()} == {1}
+    assert len(set(cluster.run(os.getpid).values())) == 2

@@ -39,7 +39,6 @@ from kesbrdf.batch.catalog import Fabric, read_catalog
 from kesbrdf.batch.runner import run_chunk
 from kesbrdf.batch.steps import RENDER_STEPS, closure
 from kesbrdf.batch.store import Store
-from kesbrdf.errors import KesbrdfError
 
 __all__ = ["run_batch", "BatchResult", "DEFAULT_STEPS", "start_local_cluster", "render_available", "worker_env"]
 
@@ -126,14 +125,17 @@ def start_local_cluster(n_workers: int, dashboard: bool | str = False, env: dict
         dash = dashboard if isinstance(dashboard, str) else "127.0.0.1:0"
         if not dash.startswith("127.0.0.1") and not dash.startswith("localhost"):
             dash = f"127.0.0.1:{dash.rsplit(':', 1)[-1]}"
-    with dask.config.set({"distributed.worker.multiprocessing-method": "spawn"}):
-        if dask.config.get("distributed.worker.multiprocessing-method") != "spawn":  # pragma: no cover
-            raise KesbrdfError("the batch needs spawned worker processes (Dr.Jit is not fork-safe)")
-        return LocalCluster(
-            n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
-            dashboard_address=dash, resources={"render": 1} if render else None,
-            env={**worker_env(n_workers), **(env or {})}, silence_logs=logging.ERROR,
-        )
+    if dask.config.get("distributed.worker.multiprocessing-method") != "spawn":
+        # globally, not in a context: nannies also use it when they restart a killed worker
+        dask.config.set({"distributed.worker.multiprocessing-method": "spawn"})
+    return LocalCluster(
+        n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
+        dashboard_address=dash, resources={"render": 1} if render else None,
+        env={**worker_env(n_workers), **(env or {})}, silence_logs=logging.ERROR,
+        # without a dashboard the scheduler still serves /health and /metrics over
+        # HTTP: keep that on a random loopback port (not 8787, not a public interface)
+        scheduler_kwargs=None if dash else {"dashboard": False, "dashboard_address": "127.0.0.1:0"},
+    )
 
 
 def _transient_record(fabric: Fabric, error: str, step: str, attempts: int) -> dict:

@@ -82,13 +82,26 @@ def step_params(step: str, options: dict, settings: dict | None = None) -> dict:
     if step == "export":
         from kesbrdf.export import FORMATS
 
-        return {"formats": sorted(FORMATS), "modules": {k: FORMATS[k] for k in sorted(FORMATS)}}
+        # formats whose module cannot be imported here (a missing optional dependency) are
+        # part of the key: installing the dependency reruns the export step
+        return {"formats": sorted(FORMATS), "modules": {k: FORMATS[k] for k in sorted(FORMATS)},
+                "unavailable": [k for k in sorted(FORMATS) if not _importable(FORMATS[k])]}
     if step == "preview":
         return {**PREVIEW_DEFAULTS, **settings.get("preview", {})}
     raise KesbrdfError(f"unknown step {step!r}")  # pragma: no cover
 
 
 # -- helpers ------------------------------------------------------------------------
+def _importable(name: str) -> bool:
+    import importlib
+
+    try:
+        importlib.import_module(name if "." in name else f"kesbrdf.export.{name}")
+    except ImportError:
+        return False
+    return True
+
+
 def make_fabric_reference(name: str | None, params: dict | None = None):
     """The fabric's ground-truth BRDF: a ``kesbrdf simulate`` reference name, or
     ``sadeghi:<preset>`` for any Sadeghi et al. 2013 preset (Table II)."""
@@ -268,10 +281,10 @@ def step_export(inputs: dict, params: dict, out: Path) -> dict:
     done, failed = {}, {}
     for fmt in params["formats"]:
         name = ex.FORMATS[fmt]
-        module = importlib.import_module(name if "." in name else f"kesbrdf.export.{name}")
-        exts = tuple(getattr(module, "EXTENSIONS", ()) or ()) or (f".{fmt}",)
-        target = out / f"model{exts[0]}"
-        try:
+        try:  # a format whose optional dependency is missing fails alone
+            module = importlib.import_module(name if "." in name else f"kesbrdf.export.{name}")
+            exts = tuple(getattr(module, "EXTENSIONS", ()) or ()) or (f".{fmt}",)
+            target = out / f"model{exts[0]}"
             if hasattr(ex, "export"):
                 res = ex.export(model, fmt, target)
             else:  # before the export framework lands: call the format module directly

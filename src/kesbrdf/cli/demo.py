@@ -109,8 +109,8 @@ def run(args) -> int:
     if not args.quick:
         _renders(out, model_path, say)
 
-    # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md)
-    if _have("distributed") and _have("kesbrdf.batch.demo"):
+    # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
+    if not args.quick and _have("distributed") and _have("kesbrdf.batch.demo"):
         from kesbrdf.batch.demo import run_demo_batch
 
         say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster")
