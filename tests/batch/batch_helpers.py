@@ -14,6 +14,8 @@ def manifests(out: Path) -> dict:
     """{(fabric, step): manifest dict} of every committed step under ``out``."""
     found = {}
     for p in sorted(Path(out).glob("*/*/manifest.json")):
+        if p.parent.name.startswith("."):  # a scratch folder of a step being computed (pathlib globs dotfiles)
+            continue
         found[(p.parent.parent.name, p.parent.name)] = json.loads(p.read_text())
     return found
 

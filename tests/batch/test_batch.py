@@ -142,7 +142,8 @@ def test_injected_transient_failure_is_retried(cluster, library, hooks, tmp_path
     record2 = tmp_path / "attempts2"
     hooks({"fail_once": {"steps": ["fit"], "fabrics": ["fabric-003"], "record": str(record2)}})
     out2 = tmp_path / "noretry"
-    result2 = run_batch(library, out2, steps=("fit",), scheduler=cluster, retries=0)
+    # (and through the scheduler's address, as `kesbrdf batch --scheduler tcp://...` does)
+    result2 = run_batch(library, out2, steps=("fit",), scheduler=cluster.scheduler.address, retries=0)
     rec = {r["id"]: r for r in result2.records}["fabric-003"]
     assert rec["status"] == "failed" and "injected transient failure" in rec["error"]
     assert result2.counts["done"] == N_GOOD - 1
@@ -254,6 +255,8 @@ def test_preview_on_render_workers(cluster, library, tmp_path):
 
     img = np.asarray(Image.open(out / fab[0].id / "preview" / "preview.png").convert("RGB"), float)
     assert img.shape == (48, 64, 3) and img.std() > 5  # a lit sphere, not a blank frame
+    sheet = Image.open(out / fab[0].id / "preview" / "colourways.png")
+    assert sheet.size == (3 * 32, 2 * 24)  # six colourway tiles, three per row
     assert "data:image/png;base64," in (out / "index.html").read_text()
 
 
