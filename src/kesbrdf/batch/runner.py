@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import shutil
 import tempfile
 import time
 from pathlib import Path
@@ -91,6 +92,11 @@ class _Input:
     def __init__(self, fabric: Fabric):
         self.fabric = fabric
         self._path: Path | None = None
+        self._tmp: Path | None = None
+
+    def cleanup(self) -> None:
+        if self._tmp is not None:
+            shutil.rmtree(self._tmp, ignore_errors=True)
 
     def path(self) -> Path:
         if self._path is None:
@@ -99,7 +105,7 @@ class _Input:
                 import fsspec
 
                 fs, p = fsspec.core.url_to_fs(src)
-                tmp = Path(tempfile.mkdtemp(prefix="kesbrdf-batch-input-"))
+                tmp = self._tmp = Path(tempfile.mkdtemp(prefix="kesbrdf-batch-input-"))
                 if not fs.exists(p):
                     raise FileNotFoundError(2, "No such file or directory", src)
                 with fs.open(p, "rb") as fh:
@@ -132,6 +138,18 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
     options = {**DEFAULT_OPTIONS, **fabric.options}
     vers = mf.versions()
     src = _Input(fabric)
+    cache = None if store.local else tempfile.mkdtemp(prefix="kesbrdf-batch-cache-")
+    try:
+        _run_steps(fabric, store, steps, settings, options, vers, src, cache, record)
+    finally:
+        if cache:
+            shutil.rmtree(cache, ignore_errors=True)
+        src.cleanup()
+    record["seconds"] = time.perf_counter() - t_start
+    return record
+
+
+def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record) -> None:
     manifests: dict[str, dict] = {}
     for step in closure(steps):
         t0 = time.perf_counter()
@@ -151,7 +169,7 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
             else:
                 inputs, local_inputs = {}, {"source": _source_name(fabric)}
                 for d in DEPENDS[step]:
-                    dirpath = store.local_dir(fabric.id, d)
+                    dirpath = store.local_dir(fabric.id, d, cache=cache)
                     for name, digest in manifests[d]["outputs"].items():
                         inputs[f"{d}/{name}"] = digest
                         local_inputs[f"{d}/{name}"] = dirpath / name
@@ -186,8 +204,6 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
             if record["error"] is None:
                 record.update(status="failed", error=_one_line(exc), failed_step=step)
         entry["seconds"] = time.perf_counter() - t0
-    record["seconds"] = time.perf_counter() - t_start
-    return record
 
 
 _STORES: dict = {}
