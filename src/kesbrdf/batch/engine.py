@@ -16,7 +16,7 @@
   started with ``--resources render=1``.
 
 One core task runs the non-render steps of a few fabrics (:func:`auto_chunk`: about
-four tasks per worker, at most 16 fabrics, which amortises Dask's per-task cost;
+eight tasks per worker, at most 16 fabrics, which amortises Dask's per-task cost;
 :func:`kesbrdf.batch.runner.run_chunk`); the preview step is one task per fabric that
 asks for ``resources={"render": 1}``.  Retries are counted per fabric by this driver:
 a fabric whose step raised anything but a fabric error, or whose task's workers kept
@@ -132,6 +132,9 @@ def start_local_cluster(n_workers: int, dashboard: bool | str = False, env: dict
         n_workers=n_workers, threads_per_worker=1, processes=True, host="127.0.0.1",
         dashboard_address=dash, resources={"render": 1} if render else None,
         env={**worker_env(n_workers), **(env or {})}, silence_logs=logging.ERROR,
+        # Dask's statistical profiler samples each task's stack 100 times a second: not
+        # worth its cost for tasks of a known shape (passed to the nanny, which spawns)
+        config=dask.config.merge(dask.config.config, {"distributed": {"worker": {"profile": {"enabled": False}}}}),
         # without a dashboard the scheduler still serves /health and /metrics over
         # HTTP: keep that on a random loopback port (not 8787, not a public interface)
         scheduler_kwargs=None if dash else {"dashboard": False, "dashboard_address": "127.0.0.1:0"},
@@ -144,8 +147,9 @@ def _transient_record(fabric: Fabric, error: str, step: str, attempts: int) -> d
 
 
 def auto_chunk(n_fabrics: int, n_workers: int) -> int:
-    """Fabrics per task: about 4 tasks per worker, at most :data:`MAX_CHUNK`."""
-    return max(1, min(MAX_CHUNK, n_fabrics // (4 * max(1, n_workers))))
+    """Fabrics per task: about 8 tasks per worker (so the last tasks leave little idle
+    time), at most :data:`MAX_CHUNK`."""
+    return max(1, min(MAX_CHUNK, n_fabrics // (8 * max(1, n_workers))))
 
 
 def _merge(core: dict, preview: dict | None) -> dict:
