@@ -15,6 +15,13 @@ serial = t_1 / t_serial − 1 (wall clock, sensitive to other load); and the
 1-worker wall time not spent inside :func:`~kesbrdf.batch.runner.run_fabric` (what Dask
 adds per task: serialisation, scheduler round trips, result transfer), which does
 not depend on how fast the machine happens to be.
+
+On a shared machine the wall clock mostly measures the other jobs, so the CPU time
+is measured too (``getrusage`` of this process and of every worker process, before and
+after each run): ``cpu_overhead`` = (CPU of workers + driver) / CPU of the serial run − 1
+is what Dask costs in CPU, and ``scaling_efficiency_2_cpu`` = t_1' / (2 t_2') with the
+dedicated-machine times estimated from CPU time, t_1' = CPU of the 1-worker run's worker
+and t_2' = max(busiest worker's CPU, total CPU / 2).
 """
 
 from __future__ import annotations
@@ -28,6 +35,13 @@ from pathlib import Path
 N_FABRICS = 48
 REPEATS = 3
 STEPS = ("fit", "validate", "export")
+
+
+def _cpu() -> float:
+    import resource
+
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime
 
 
 def run() -> dict:
@@ -52,15 +66,22 @@ def run() -> dict:
         for n, c in clients.items():
             run_batch(fabrics[:4], root / f"warm{n}", steps=STEPS, scheduler=c, write_summary=False)
         best = {"serial": (float("inf"), 0.0), 1: (float("inf"), 0.0), 2: (float("inf"), 0.0)}
+        cpu = {"serial": [], 1: [], 2: []}
         for k in range(REPEATS):
             for which in ("serial", 1, 2):
                 out = root / f"{which}_{k}"
+                w0 = clients[which].run(_cpu) if which != "serial" else {}
+                c0 = _cpu()
                 t0 = time.perf_counter()
                 if which == "serial":
                     r = run_batch(fabrics, out, steps=STEPS, workers=0, write_summary=False)
                 else:
                     r = run_batch(fabrics, out, steps=STEPS, scheduler=clients[which], write_summary=False)
                 wall = time.perf_counter() - t0
+                driver = _cpu() - c0
+                w1 = clients[which].run(_cpu) if which != "serial" else {}
+                per_worker = sorted(w1[a] - w0[a] for a in w1 if a in w0)
+                cpu[which].append((driver, per_worker))
                 assert r.counts["done"] == N_FABRICS, r.counts
                 inside = sum(rec["seconds"] for rec in r.records)
                 if wall < best[which][0]:
@@ -84,6 +105,21 @@ def run() -> dict:
         "per_fabric_serial_ms": t_s / N_FABRICS * 1e3,
         "per_fabric_scheduling_ms": (t_1 - best[1][1]) / N_FABRICS * 1e3,
         "load_average_1min": os.getloadavg()[0],
+    })
+    # CPU-time view (insensitive to other load): medians over the repeats
+    import statistics
+
+    c_s = statistics.median(d for d, _ in cpu["serial"])
+    c_1 = statistics.median(d + sum(w) for d, w in cpu[1])
+    w_1 = statistics.median(sum(w) for _, w in cpu[1])
+    t2 = statistics.median(max(max(w), (d + sum(w)) / 2) for d, w in cpu[2])
+    res.update({
+        "serial_cpu_s": c_s, "dask_1_cpu_s": c_1, "dask_1_worker_cpu_s": w_1,
+        "dask_2_worker_cpu_s": [statistics.median(w[i] for _, w in cpu[2]) for i in range(2)],
+        "dask_2_driver_cpu_s": statistics.median(d for d, _ in cpu[2]),
+        "cpu_overhead": c_1 / c_s - 1,
+        "scaling_efficiency_2_cpu": w_1 / (2 * t2),
+        "cpu_fabrics_per_min_per_core": N_FABRICS / c_s * 60,
     })
     return res
 
