@@ -348,3 +348,24 @@ def test_object_store_path_commits_manifest_last_and_skips_on_rerun(library, ser
     again = run_batch(library, url, steps=("fit", "validate"), workers=0)
     assert again.counts["skipped"] == N_GOOD
     fs.rm("/kesbrdf-batch-test", recursive=True)
+
+
+def test_catalogue_and_inputs_behind_an_fsspec_url(library, serial, tmp_path):
+    """Inputs fetched through fsspec (memory:// here, s3:// in production), manifests with their frames."""
+    import fsspec
+
+    from kesbrdf.batch import run_batch
+
+    fs = fsspec.filesystem("memory")
+    if fs.exists("/kesbrdf-batch-lib"):
+        fs.rm("/kesbrdf-batch-lib", recursive=True)
+    fs.put(str(library.parent) + "/", "/kesbrdf-batch-lib/", recursive=True)
+    result = run_batch("memory://kesbrdf-batch-lib/catalog.csv", tmp_path / "out", steps=("fit",), workers=0)
+    assert result.counts["done"] == N_GOOD and result.counts["failed"] == N_BROKEN
+    got, ref = _outputs(tmp_path / "out"), _outputs(serial[0])
+    for fid in ("fabric-001", "fabric-003"):  # a measurement CSV and a camera manifest
+        assert got[(fid, "ingest")] == ref[(fid, "ingest")]
+    rec = {r["id"]: r for r in result.records}
+    assert rec["fabric-003"]["steps"]["ingest"]["result"]["source"] == "manifest"
+    assert "No such file or directory" in rec["broken-3-missing-file"]["error"]
+    fs.rm("/kesbrdf-batch-lib", recursive=True)
