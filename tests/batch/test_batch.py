@@ -158,7 +158,7 @@ def test_killed_driver_rerun_recomputes_nothing_finished(library, serial, tmp_pa
     from kesbrdf.batch.runner import TEST_HOOKS_ENV
 
     hooks = tmp_path / "slow.json"
-    hooks.write_text(json.dumps({"sleep": {"steps": ["validate"], "seconds": 0.5}}))
+    hooks.write_text(json.dumps({"sleep": {"steps": ["validate"], "seconds": 0.7}}))
     out = tmp_path / "killed"
     env = {**os.environ, TEST_HOOKS_ENV: str(hooks), "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.Popen([sys.executable, "-m", "kesbrdf.cli.main", "batch", str(library), "-o", str(out),
