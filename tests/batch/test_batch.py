@@ -289,11 +289,11 @@ def test_export_step_runs_every_listed_format(library, tmp_path, monkeypatch):
     st = second.records[0]["steps"]
     # a new format reruns export and nothing upstream
     assert st["fit"]["status"] == "skipped" and st["export"]["status"] == "done"
-    doc = json.loads((out / fabrics[0].id / "export" / "model.fake.json").read_text())
+    doc = json.loads((out / fabrics[0].id / "export" / "fake" / "model.fake.json").read_text())
     assert doc["channels"] == ["R", "G", "B"] and len(doc["shape"]) == 3
     assert "broken" in st["export"]["result"]["failed"]  # a missing module fails alone
     row = next(csv.DictReader(open(out / "summary.csv")))
-    assert row["exports"] == f"{fabrics[0].id}/export/model.fake.json" and row["export_formats"] == "fake"
+    assert row["exports"] == f"{fabrics[0].id}/export/fake/model.fake.json" and row["export_formats"] == "fake"
     assert row["export_errors"].startswith("broken: ")
 
 

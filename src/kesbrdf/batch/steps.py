@@ -16,8 +16,8 @@ fit        ingest                          ``model.kes.json``
 validate   ingest, fit                     ``validation.json`` (round trip, leave-one-
                                            orientation-out, reference when given)
 report     ingest, fit, validate           ``report.html`` (the paper's figures)
-export     fit                             one file per format in ``export.FORMATS``
-                                           plus ``export.json``
+export     fit                             ``<format>/model.<ext>`` per format in
+                                           ``export.FORMATS``, plus ``export.json``
 preview    fit                             ``preview.png`` and ``colourways.png``
                                            (Mitsuba; runs on ``render`` workers)
 =========  ==============================  ==========================================
@@ -274,30 +274,40 @@ def step_report(inputs: dict, params: dict, out: Path) -> dict:
 
 def step_export(inputs: dict, params: dict, out: Path) -> dict:
     import importlib
+    import shutil
 
     import kesbrdf.export as ex
 
+    import time
+
     model = _load_model(inputs)
-    done, failed = {}, {}
+    done, failed, seconds = {}, {}, {}
     for fmt in params["formats"]:
         name = ex.FORMATS[fmt]
+        t0 = time.perf_counter()
         try:  # a format whose optional dependency is missing fails alone
             module = importlib.import_module(name if "." in name else f"kesbrdf.export.{name}")
             exts = tuple(getattr(module, "EXTENSIONS", ()) or ()) or (f".{fmt}",)
-            target = out / f"model{exts[0]}"
+            # one folder per format: formats share endings (.bsdf) and write side files
+            (out / fmt).mkdir()
+            target = out / fmt / f"model{exts[0]}"
             if hasattr(ex, "export"):
                 res = ex.export(model, fmt, target)
             else:  # before the export framework lands: call the format module directly
                 res = module.export(model, target)
         except (KesbrdfError, ImportError) as exc:
             failed[fmt] = " ".join(str(exc).split())
+            shutil.rmtree(out / fmt, ignore_errors=True)  # no partial files of a failed format
             continue
+        finally:
+            seconds[fmt] = time.perf_counter() - t0
         info = res.to_json() if hasattr(res, "to_json") else {"paths": [str(target)]}
         info["paths"] = [os.path.relpath(p, out) for p in info.get("paths", [])]
         done[fmt] = info
     _write_json(out / "export.json", {"formats": done, "failed": failed})
     note = None if params["formats"] else "no export formats installed (kesbrdf.export.FORMATS is empty)"
-    return {"formats": sorted(done), "failed": failed, "note": note,
+    # timings go to the manifest's result, never into files (outputs stay bit-reproducible)
+    return {"formats": sorted(done), "failed": failed, "note": note, "seconds": seconds,
             "paths": [p for v in done.values() for p in v["paths"]]}
 
 
