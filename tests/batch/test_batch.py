@@ -252,6 +252,8 @@ def test_preview_on_render_workers(cluster, library, tmp_path):
     rec = result.records[0]
     assert rec["status"] == "ok", rec["error"]
     assert rec["steps"]["preview"]["status"] == "done"
+    # Dr.Jit's pool capped at cores // workers (no oversubscription by 2 render workers)
+    assert rec["steps"]["preview"]["result"]["drjit_threads"] == max(1, (os.cpu_count() or 1) // 2)
     from PIL import Image
     import numpy as np
 

@@ -281,6 +281,8 @@ def step_export(inputs: dict, params: dict, out: Path) -> dict:
     import time
 
     model = _load_model(inputs)
+    if params["formats"] and os.environ.get("KESBRDF_DRJIT_THREADS"):
+        drjit_threads()  # some writers build Mitsuba warps
     done, failed, seconds = {}, {}, {}
     for fmt in params["formats"]:
         name = ex.FORMATS[fmt]
@@ -311,13 +313,31 @@ def step_export(inputs: dict, params: dict, out: Path) -> dict:
             "paths": [p for v in done.values() for p in v["paths"]]}
 
 
-def step_preview(inputs: dict, params: dict, out: Path) -> dict:
-    from kesbrdf._drjit import import_mitsuba
+def drjit_threads(required: bool = False) -> int | None:
+    """Cap Dr.Jit's thread pool at ``$KESBRDF_DRJIT_THREADS`` (cores per worker).
 
-    _mi, dr = import_mitsuba("the batch preview step")
+    Dr.Jit's LLVM backend starts a pool over *all* cores in every process; k workers per
+    node would run k × cores threads.  Called before the steps that may run Dr.Jit
+    (export formats that build Mitsuba warps, the preview render).  Returns the count
+    set, or None (not set, or Mitsuba absent and not ``required``).
+    """
     threads = int(os.environ.get("KESBRDF_DRJIT_THREADS", "0") or 0)
+    try:
+        from kesbrdf._drjit import import_mitsuba
+
+        _mi, dr = import_mitsuba("the batch preview step")
+    except ImportError:
+        if required:
+            raise
+        return None
     if threads > 0:
         dr.set_thread_count(threads)
+        return threads
+    return None
+
+
+def step_preview(inputs: dict, params: dict, out: Path) -> dict:
+    threads = drjit_threads(required=True)
     from kesbrdf.render import scenes
     from kesbrdf.render.colourways import DEFAULT_COLOURWAYS, render_colourways
 
