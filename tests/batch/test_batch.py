@@ -297,6 +297,11 @@ def test_export_step_runs_every_listed_format(library, tmp_path, monkeypatch):
     row = next(csv.DictReader(open(out / "summary.csv")))
     assert row["exports"] == f"{fabrics[0].id}/export/fake/model.fake.json" and row["export_formats"] == "fake"
     assert row["export_errors"].startswith("broken: ")
+    # choosing formats is a parameter of the step: only export reruns, with only that format
+    third = run_batch(fabrics, out, steps=("export",), workers=0, settings={"export": {"formats": ["fake"]}})
+    st = third.records[0]["steps"]
+    assert st["fit"]["status"] == "skipped" and st["export"]["status"] == "done"
+    assert st["export"]["result"]["formats"] == ["fake"] and st["export"]["result"]["failed"] == {}
 
 
 def test_demo_batch_quick(tmp_path, cluster):

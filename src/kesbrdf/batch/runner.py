@@ -158,8 +158,8 @@ def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record
         if any(record["steps"].get(d, {}).get("status") in ("failed", "blocked") for d in DEPENDS[step]):
             entry["status"] = "blocked"
             continue
-        params = step_params(step, options, settings)
         try:
+            params = step_params(step, options, settings)
             if step == "ingest":
                 files = input_files(src.path())
                 base = files[0].parent

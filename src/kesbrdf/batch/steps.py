@@ -82,10 +82,17 @@ def step_params(step: str, options: dict, settings: dict | None = None) -> dict:
     if step == "export":
         from kesbrdf.export import FORMATS
 
+        wanted = settings.get("export", {}).get("formats")  # None: every installed format
+        if wanted is not None:
+            unknown = sorted(set(wanted) - set(FORMATS))
+            if unknown:
+                raise KesbrdfError(f"export formats: unknown {', '.join(map(repr, unknown))}; "
+                                   f"installed: {', '.join(FORMATS) or '(none)'}")
+        fmts = sorted(f for f in FORMATS if wanted is None or f in wanted)
         # formats whose module cannot be imported here (a missing optional dependency) are
         # part of the key: installing the dependency reruns the export step
-        return {"formats": sorted(FORMATS), "modules": {k: FORMATS[k] for k in sorted(FORMATS)},
-                "unavailable": [k for k in sorted(FORMATS) if not _importable(FORMATS[k])]}
+        return {"formats": fmts, "modules": {k: FORMATS[k] for k in fmts},
+                "unavailable": [k for k in fmts if not _importable(FORMATS[k])]}
     if step == "preview":
         return {**PREVIEW_DEFAULTS, **settings.get("preview", {})}
     raise KesbrdfError(f"unknown step {step!r}")  # pragma: no cover

@@ -21,6 +21,8 @@ def add_arguments(p):
     p.add_argument("--dashboard", nargs="?", const=True, default=False, metavar="PORT",
                    help="serve the Dask dashboard on 127.0.0.1 (optionally on PORT) and print its address")
     p.add_argument("--preview-spp", type=int, default=None, help="samples per pixel of the preview tile")
+    p.add_argument("--export-formats", default=None, metavar="A,B",
+                   help="export only these formats (default: every format in kesbrdf.export.FORMATS)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -80,6 +82,15 @@ def run(args) -> int:
             stderr("note: the Dask dashboard needs bokeh (pip install 'bokeh>=3.1'); running without it")
             dashboard = False
     settings = {"preview": {"spp": args.preview_spp}} if args.preview_spp else {}
+    if args.export_formats is not None:
+        from kesbrdf.export import FORMATS
+
+        wanted = [f.strip() for f in args.export_formats.split(",") if f.strip()]
+        unknown = [f for f in wanted if f not in FORMATS]
+        if unknown:
+            raise KesbrdfError(f"--export-formats: unknown {', '.join(map(repr, unknown))}; "
+                               f"installed: {', '.join(FORMATS) or '(none)'}")
+        settings["export"] = {"formats": wanted}
     bar = _Bar(not args.no_progress)
     try:
         result = run_batch(args.catalog, args.output, steps=steps, workers=args.workers, scheduler=args.scheduler,
