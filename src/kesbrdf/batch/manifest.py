@@ -34,8 +34,9 @@ __all__ = ["MANIFEST", "FORMAT", "FORMAT_VERSION", "versions", "canonical_json",
 MANIFEST = "manifest.json"
 FORMAT = "kesbrdf-batch-step"
 FORMAT_VERSION = 1
-#: Steps whose results depend on the renderer: the Mitsuba version is part of their key.
-RENDER_STEPS = frozenset({"preview"})
+#: Steps whose results may depend on Mitsuba (the preview render; export formats that
+#: build Mitsuba's warps): the Mitsuba version is part of their key.
+MITSUBA_STEPS = frozenset({"preview", "export"})
 
 
 def _dist_version(name: str) -> str | None:
@@ -69,8 +70,9 @@ def sha256_bytes(data: bytes) -> str:
 
 
 def key_versions(step: str, vers: dict) -> dict:
-    """The versions that invalidate ``step``: kesbrdf and numpy always, Mitsuba for renders."""
-    keep = ("kesbrdf", "numpy", "mitsuba") if step in RENDER_STEPS else ("kesbrdf", "numpy")
+    """The versions that invalidate ``step``: kesbrdf and numpy always, Mitsuba for
+    :data:`MITSUBA_STEPS`."""
+    keep = ("kesbrdf", "numpy", "mitsuba") if step in MITSUBA_STEPS else ("kesbrdf", "numpy")
     return {k: vers.get(k) for k in keep}
 
 
