@@ -32,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-N_FABRICS = 48
+N_FABRICS = 192
 REPEATS = 3
 STEPS = ("fit", "validate", "export")
 
@@ -62,9 +62,9 @@ def run() -> dict:
             clusters.append(cl)
             clients[n] = Client(cl)
             res[f"dask_{n}_startup_s"] = time.perf_counter() - t0
-        run_batch(fabrics[:4], root / "warm0", steps=STEPS, workers=0, write_summary=False)
+        run_batch(fabrics[:8], root / "warm0", steps=STEPS, workers=0, write_summary=False)
         for n, c in clients.items():
-            run_batch(fabrics[:4], root / f"warm{n}", steps=STEPS, scheduler=c, write_summary=False)
+            run_batch(fabrics[:8], root / f"warm{n}", steps=STEPS, scheduler=c, write_summary=False)
         best = {"serial": (float("inf"), 0.0), 1: (float("inf"), 0.0), 2: (float("inf"), 0.0)}
         cpu = {"serial": [], 1: [], 2: []}
         for k in range(REPEATS):

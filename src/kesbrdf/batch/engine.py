@@ -149,6 +149,16 @@ def start_local_cluster(n_workers: int, dashboard: bool | str = False, env: dict
         )
 
 
+def chunks(fabrics: list, size: int, n_workers: int) -> list[list]:
+    """Groups of ``size`` fabrics, then single fabrics for the last ``size × workers``
+    (guided scheduling: big tasks amortise Dask's cost, the small ones at the end keep
+    every worker busy until the last fabric, so no worker idles behind a long task)."""
+    tail = min(len(fabrics), size * max(1, n_workers)) if size > 1 else 0
+    head = len(fabrics) - tail
+    out = [fabrics[k:min(k + size, head)] for k in range(0, head, size)]
+    return out + [[f] for f in fabrics[head:]]
+
+
 def _transient_record(fabric: Fabric, error: str, step: str, attempts: int) -> dict:
     return {"id": fabric.id, "input": fabric.input, "status": "failed", "failed_step": step,
             "error": f"transient failure persisted after {attempts} attempt(s): {error}", "steps": {}}
@@ -322,8 +332,8 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
             finish(rec)
 
         fab_by_id = {f.id: f for f in fabrics}
-        for k in range(0, len(fabrics), size):
-            submit(fabrics[k:k + size], "core")
+        for group in chunks(fabrics, size, n_workers):
+            submit(group, "core")
         for fut in ac:
             group, kind = by_key.pop(fut.key)
             try:
