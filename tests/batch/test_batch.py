@@ -147,7 +147,8 @@ def test_injected_transient_failure_is_retried(cluster, library, hooks, tmp_path
     # (and through the scheduler's address, as `kesbrdf batch --scheduler tcp://...` does)
     result2 = run_batch(library, out2, steps=("fit",), scheduler=cluster.scheduler.address, retries=0)
     rec = {r["id"]: r for r in result2.records}["fabric-003"]
-    assert rec["status"] == "failed" and "injected transient failure" in rec["error"]
+    assert rec["status"] == "failed" and "injected transient failure" in rec["error"] and rec["failed_step"] == "fit"
+    assert rec["error"].startswith("transient failure persisted after 1 attempt(s): RuntimeError: ")
     assert result2.counts["done"] == N_GOOD - 1
     assert not (out2 / "fabric-003" / "fit").exists() and leftovers(out2) == []
 

@@ -255,7 +255,7 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
                 if rec["status"] != "transient":
                     break
             if rec["status"] == "transient":
-                rec = _transient_record(fab, rec["error"], "?", attempt)
+                rec = _transient_record(fab, rec["error"], rec.get("failed_step") or "unknown", attempt)
             finish(rec)
         n_workers = 0
     else:
@@ -352,7 +352,8 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
                     if n <= retries:
                         again.append(fab)
                         continue
-                    rec = _transient_record(fab, rec["error"], "preview" if kind == "render" else "core", n)
+                    step = rec.get("failed_step") or ("preview" if kind == "render" else "unknown")
+                    rec = _transient_record(fab, rec["error"], step, n)
                 if kind == "core":
                     done_core(rec)
                 else:

@@ -203,6 +203,12 @@ def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record
             entry["status"] = "failed"
             if record["error"] is None:
                 record.update(status="failed", error=_one_line(exc), failed_step=step)
+        except Exception as exc:  # transient: the caller retries; say where it happened
+            try:
+                exc.kesbrdf_step = step
+            except (AttributeError, TypeError):  # pragma: no cover - exceptions without a __dict__
+                pass
+            raise
         entry["seconds"] = time.perf_counter() - t0
 
 
@@ -230,6 +236,7 @@ def run_chunk(fabrics, url: str, storage_options: dict | None, steps, settings: 
         try:
             out.append(run_fabric(fab, store, steps, settings))
         except Exception as exc:  # anything but a fabric error: retried by the driver
-            out.append({"id": fab.id, "input": fab.input, "status": "transient", "failed_step": None,
+            out.append({"id": fab.id, "input": fab.input, "status": "transient",
+                        "failed_step": getattr(exc, "kesbrdf_step", None),
                         "error": " ".join(f"{type(exc).__name__}: {exc}".split()), "steps": {}})
     return out
