@@ -112,6 +112,13 @@ def run(args) -> int:
     if not args.quick:
         _exports(out, model, say)
         _renders(out, model_path, say)
+
+    # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
+    if not args.quick and _have("distributed") and _have("kesbrdf.batch.demo"):
+        from kesbrdf.batch.demo import run_demo_batch
+
+        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster")
+        run_demo_batch(out / "batch", quick=args.quick, progress=say)
     stderr(f"demo outputs in {out}/")
     stderr(f"open the interactive viewer on this model:  kesbrdf view {model_path}")
     return 0

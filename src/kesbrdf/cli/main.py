@@ -36,6 +36,7 @@ COMMANDS: dict[str, str] = {
     "export": "export",
     "view": "view",
     "demo": "demo",
+    "batch": "batch",
 }
 
 EXIT_USER_ERROR = 2

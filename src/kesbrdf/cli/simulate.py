@@ -23,9 +23,14 @@ def add_arguments(p):
     p.add_argument("--bit-depth", type=int, choices=(8, 16), default=16,
                    help="camera frames' bit depth (16: TIFF, 8: PNG)")
     p.add_argument("--vignetting", type=float, default=0.0, help="relative illumination fall-off k (1 - k r^2)")
+    # batch: a synthetic fabric library (kesbrdf.batch.library); -o is then a folder
+    p.add_argument("--library", type=int, metavar="N", help="write N varied fabrics + catalog.csv into the folder -o")
+    p.add_argument("--broken", type=int, default=2, help="with --library: deliberately broken fabrics (default 2)")
 
 
 def run(args) -> int:
+    if getattr(args, "library", None) is not None:
+        return _run_library(args)
     from kesbrdf.errors import KesbrdfError
     from kesbrdf.gonio import measure
     from kesbrdf.io.measurement_csv import write_measurement
@@ -68,4 +73,12 @@ def run(args) -> int:
     )
     write_measurement(args.output, m)
     stderr(f"wrote {len(m)} simulated samples ({', '.join(m.channels)}) to {args.output}")
+    return 0
+
+
+def _run_library(args) -> int:
+    from kesbrdf.batch.library import simulate_library
+
+    catalog = simulate_library(args.library, args.output, seed=args.seed, broken=args.broken)
+    stderr(f"wrote {args.library} fabric(s) + {args.broken} broken one(s) and the catalogue {catalog}")
     return 0

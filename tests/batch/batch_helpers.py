@@ -1,0 +1,28 @@
+"""Helpers shared by the batch tests (imported by name: tests/ has no packages)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+#: good fabrics in the shared library (every 3rd from camera frames), plus broken ones
+N_GOOD = 6
+N_BROKEN = 3
+
+
+def manifests(out: Path) -> dict:
+    """{(fabric, step): manifest dict} of every committed step under ``out``."""
+    found = {}
+    for p in sorted(Path(out).glob("*/*/manifest.json")):
+        if p.parent.name.startswith("."):  # a scratch folder of a step being computed (pathlib globs dotfiles)
+            continue
+        found[(p.parent.parent.name, p.parent.name)] = json.loads(p.read_text())
+    return found
+
+
+def leftovers(out: Path) -> list:
+    """Scratch folders and step folders without a manifest (half-written results)."""
+    bad = [p for p in Path(out).glob("*/.*")]
+    bad += [p for p in Path(out).glob("*/*") if p.is_dir() and not p.name.startswith(".")
+            and not (p / "manifest.json").is_file()]
+    return bad
