@@ -33,6 +33,7 @@ COMMANDS: dict[str, str] = {
     "render": "render",
     "drape": "drape",
     "colourways": "colourways",
+    "compare-render": "compare_render",
     "view": "view",
     "demo": "demo",
 }
