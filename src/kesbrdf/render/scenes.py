@@ -10,7 +10,8 @@ Scenes (``SCENES``):
     ``uv_rotation_deg=90`` turns the UVs so the warp runs along world z.
 ``drape``
     A drape folder from ``kesbrdf drape`` (one frame and its colliders); without a
-    folder, a procedurally folded sheet over a dome.
+    folder, a procedurally folded sheet over a dome (u = warp across the folds;
+    ``uv_rotation_deg=90`` puts the warp along them).
 ``dressform``
     A dress form built from primitives (ellipsoid torso, neck, pole, base) wearing a
     garment: the drape folder's frame when given, else a procedural flared skirt.
@@ -342,7 +343,8 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
                 if c.is_file():
                     shapes[f"collider_{k}"] = _ply_shape(c, _diffuse((0.5, 0.48, 0.45)), drape.up_axis)
         elif scene == "drape":
-            shapes["cloth"] = _mesh_shape(workdir, "folded", _mesh.folded_cloth(), bsdf)
+            p, n, uv, f = _mesh.folded_cloth()
+            shapes["cloth"] = _mesh_shape(workdir, "folded", (p, n, _mesh.rotate_uv(uv, opts.uv_rotation_deg), f), bsdf)
         else:  # dressform with a procedural skirt
             shapes["cloth"] = _mesh_shape(workdir, "skirt", _mesh.skirt(top=1.0), bsdf)
         if scene == "dressform" and drape is None:
