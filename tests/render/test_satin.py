@@ -90,18 +90,20 @@ def test_dyed_satin_keeps_a_white_sheen(render_module, black_satin_model):
 
 #: Image difference required between UV rotations, in units of the Monte-Carlo noise
 #: floor (the same difference between two seeds of one image).  With independent noise,
-#: diff^2 = signal^2 + noise^2, so diff > 3 noise means the rotation changes the image by
-#: more than 2.8 noise.  Measured at 64x48/16 spp: 3.7x (model, drape), 11x (reference, swatch).
-UV_DIFF_OVER_NOISE = 3.0
+#: diff^2 = signal^2 + noise^2, so diff > 2.5 noise means the rotation changes the image
+#: by more than 2.3 noise.  Measured at 64x48: 3.8x (model, drape, 64 spp), 11x
+#: (reference, swatch, 16 spp).  The model's ratio is the smaller one because its
+#: highlight is less anisotropic than the reference's (docs/rendering.md).
+UV_DIFF_OVER_NOISE = 2.5
 #: The highlight ellipse of the reference on the swatch turns (measured 89 deg -> 0 deg).
 UV_MIN_ROTATION_DEG = 45.0
 
 
-def _render(bsdf, scene, rot, seed):
+def _render(bsdf, scene, rot, seed, spp=16):
     from kesbrdf.render import scenes as S
     from kesbrdf.render.compare import cloth_mask
 
-    o = S.RenderOptions(spp=16, resolution=(64, 48), env="none", light="area", uv_rotation_deg=rot, seed=seed)
+    o = S.RenderOptions(spp=spp, resolution=(64, 48), env="none", light="area", uv_rotation_deg=rot, seed=seed)
     sc = S.load_scene(None, scene, o, cloth_bsdf=bsdf)
     return S.render_scene(sc, o), cloth_mask(sc)
 
@@ -111,9 +113,9 @@ def test_uv_rotation_moves_the_model_highlight_on_folds(render_module, black_sat
     from kesbrdf.render.scenes import RenderOptions, bsdf_dict
 
     bsdf = bsdf_dict(black_satin_model[0], RenderOptions())
-    a, mask = _render(bsdf, "drape", 0, 0)
-    a2, _ = _render(bsdf, "drape", 0, 1)
-    b, _ = _render(bsdf, "drape", 90, 1)
+    a, mask = _render(bsdf, "drape", 0, 0, spp=64)
+    a2, _ = _render(bsdf, "drape", 0, 1, spp=64)
+    b, _ = _render(bsdf, "drape", 90, 1, spp=64)
     noise = relative_rmse(a2, a, mask)
     diff = relative_rmse(b, a, mask)
     assert diff > UV_DIFF_OVER_NOISE * noise, (diff, noise)
@@ -131,3 +133,30 @@ def test_uv_rotation_turns_the_reference_highlight(render_module):
     assert relative_rmse(b, a, mask) > UV_DIFF_OVER_NOISE * relative_rmse(a2, a, mask)
     sa, sb = highlight_stats(a, mask), highlight_stats(b, mask)
     assert orientation_difference_deg(sa["orientation_deg"], sb["orientation_deg"]) > UV_MIN_ROTATION_DEG, (sa, sb)
+
+
+def test_fade_extrapolation_changes_only_the_unmeasured_deviations(render_module, black_satin_model, rng):
+    """``extrapolation="fade"`` = ``hold`` up to γ_max, the body alone beyond γ_max + 6°."""
+    import math
+
+    import drjit as dr
+    import mitsuba as mi
+
+    from kesbrdf.brdf import to_phi_gamma
+    from kesbrdf.render.bsdf import FADE_DEG
+
+    path, model = black_satin_model
+    wi, wr = _pairs(rng, 4000)
+    out = {}
+    for ex in ("hold", "fade"):
+        bsdf = mi.load_dict({"type": "kesbrdf", "filename": str(path), "extrapolation": ex})
+        si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+        si.wi = mi.Vector3f(*wr.T)
+        out[ex] = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T / wi[:, 2:3]
+    _, gamma = to_phi_gamma(wi, wr, "deviation")
+    g_max = model.gamma_grid[-1]
+    inside = gamma < g_max - 1e-4
+    beyond = gamma > g_max + math.radians(FADE_DEG) + 1e-4
+    assert inside.sum() > 100 and beyond.sum() > 100  # both regions are exercised
+    np.testing.assert_array_equal(out["fade"][inside], out["hold"][inside])
+    np.testing.assert_allclose(out["fade"][beyond], np.broadcast_to(model.body, out["fade"][beyond].shape), rtol=1e-5)

@@ -81,6 +81,9 @@ class RenderOptions:
     uv_rotation_deg: float = 0.0
     exposure: float = 0.0
     floor: bool = True
+    #: lobe beyond the last measured deviation (kesbrdf plugin ``extrapolation``):
+    #: renders fade it (measured closer to the reference satins, docs/rendering.md)
+    extrapolation: str = "fade"
     integrator: dict | None = field(default=None, repr=False)
 
     def validate(self) -> "RenderOptions":
@@ -165,6 +168,8 @@ def bsdf_dict(model_path, opts: RenderOptions) -> dict:
         "two_sided": bool(opts.two_sided),
         "sampling": opts.sampling,
     }
+    if opts.extrapolation != "hold":
+        d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
         d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
     if opts.lobe_tint is not None:
