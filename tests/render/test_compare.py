@@ -112,3 +112,26 @@ def test_chi2_halfdiff_sampling(render_module, tmp_path, monkeypatch, theta):
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3,
                          sample_count=200_000, res=64, ires=16, seed=2)
     assert test.run(), test.messages
+
+
+def test_report_embeds_the_panels(render_module, tmp_path):
+    from kesbrdf.plotting.report import build_report
+    from kesbrdf.render.compare import compare_render
+
+    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=tmp_path / "p.png", noise_floor=False)
+    text = build_report(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}])
+    assert "Reference vs model renders" in text
+    assert text.count('<figure class="compare">') == 1  # the missing panel is skipped
+    assert f"FLIP {r['flip']:.3f}" in text
+    assert "Reference vs model renders" not in build_report(figures=())
+
+
+def test_demo_comparisons_step(render_module, tmp_path):
+    from kesbrdf.cli.demo import _comparisons
+    from kesbrdf.references.ward import AnisotropicWard
+
+    said = []
+    out = _comparisons(tmp_path, AnisotropicWard(0.08, 0.22), said.append)
+    assert [c["protocol"] for c in out] == ["paper", "dense"]
+    assert all((tmp_path / "compare" / f"satin-ward_{p}.png").is_file() for p in ("paper", "dense"))
+    assert len(said) == 2

@@ -21,6 +21,8 @@ def add_arguments(p):
                    help="render both with this body albedo (default: each one's own body)")
     p.add_argument("-o", "--output", required=True, help="panel PNG (the numbers go to <stem>.json)")
     add_render_options(p, spp=64, resolution="160x120")
+    # one small light in a dark room shows the lobe's shape (kesbrdf.render.compare)
+    p.set_defaults(env="none")
 
 
 def run(args) -> int:

@@ -56,6 +56,7 @@ from kesbrdf.render.reference_bsdf import make_reference, reference_bsdf_dict
 __all__ = [
     "PROTOCOLS",
     "DEFAULT_REFERENCES",
+    "default_options",
     "fit_reference_model",
     "model_bsdf_dict",
     "cloth_mask",
@@ -76,6 +77,13 @@ AUTO_EXPOSURE_QUANTILE = 0.995
 #: Pixels per degree for FLIP (its default: a 0.7 m viewing distance on a 4K 0.7 m monitor).
 FLIP_PPD = 67.0
 _REC709 = np.array([0.2126, 0.7152, 0.0722])
+
+
+def default_options(**kw) -> "_scenes.RenderOptions":
+    """Render options of a comparison: 160x120, 64 spp, area light, no environment."""
+    base = {"spp": 64, "resolution": (160, 120), "env": "none", "light": "area"}
+    base.update(kw)
+    return _scenes.RenderOptions(**base)
 
 
 def fit_reference_model(ref, protocol: str = "paper"):
@@ -178,7 +186,9 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     scene : str
         A scene of :data:`kesbrdf.render.scenes.SCENES` without a drape folder.
     opts : RenderOptions, optional
-        Default: 160x120, 64 spp, studio environment + area light, two-sided.
+        Default :func:`default_options`: 160x120, 64 spp, the area light alone in a dark
+        room (``env="none"``): one small source shows the lobe's shape, where a broad
+        environment averages it away (and doubles the noise floor at equal spp).
     output : path, optional
         PNG panel to write; the numbers go next to it as ``<stem>.json``.
     noise_floor : bool
@@ -193,7 +203,7 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     """
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
-    opts = (opts or _scenes.RenderOptions(spp=64, resolution=(160, 120))).validate()
+    opts = (opts or default_options()).validate()
     ref = make_reference(reference, params)
     model, n_samples = fit_reference_model(ref, protocol)
     kind = getattr(model, "kind", "kes")
