@@ -126,9 +126,13 @@ def test_report_embeds_the_panels(render_module, tmp_path):
     assert "Reference vs model renders" not in build_report(figures=())
 
 
-def test_demo_comparisons_step(render_module, tmp_path):
+def test_demo_comparisons_step(render_module, tmp_path, monkeypatch):
     from kesbrdf.cli.demo import _comparisons
     from kesbrdf.references.ward import AnisotropicWard
+    from kesbrdf.render import compare
+
+    tiny = compare.default_options
+    monkeypatch.setattr(compare, "default_options", lambda **kw: tiny(**{**kw, "spp": 8, "resolution": (48, 36)}))
 
     said = []
     out = _comparisons(tmp_path, AnisotropicWard(0.08, 0.22), said.append)
