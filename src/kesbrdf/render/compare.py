@@ -51,7 +51,7 @@ import mitsuba as mi
 from kesbrdf._atomic import atomic_path, write_text
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.render import scenes as _scenes
-from kesbrdf.render.reference_bsdf import make_reference, reference_bsdf_dict
+from kesbrdf.render.reference_bsdf import make_reference, reference_bsdf_dict  # noqa: F401 (re-exported)
 
 __all__ = [
     "PROTOCOLS",
@@ -111,6 +111,8 @@ def model_bsdf_dict(model_path, kind: str, opts: "_scenes.RenderOptions") -> dic
              "sampling": opts.sampling}
         if opts.base_color is not None:
             d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
+        if opts.extrapolation != "hold":
+            d["extrapolation"] = opts.extrapolation
         return d
     raise KesbrdfError(f"the renderer draws models of kind 'kes' or 'kes-halfdiff', got {kind!r}")
 

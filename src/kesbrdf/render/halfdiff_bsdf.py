@@ -16,6 +16,11 @@ Frames and colour as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp;
 ``si.wi`` is the viewer ω_r, ``wo`` the light ω_i; ``base_color`` replaces the body by
 base_color/π, ``lobe_tint`` multiplies T.
 
+``extrapolation``: ``hold`` (default, as :func:`~kesbrdf.halfdiff.evaluate_halfdiff`)
+keeps the table at the last measured θ_h; ``fade`` scales the lobe by
+max(0, 1 − (θ_h − θ_h,max)/(Δ/2)), Δ = :data:`kesbrdf.render.bsdf.FADE_DEG` (the same
+fade as the ``kesbrdf`` plugin's, in γ = 2θ_h).
+
 Sampling: the mixture of :mod:`kesbrdf.render.sampling` with the ``halfvector``
 lobe, whose (φ_h, γ = 2θ_h) density is the table averaged over θ_d.
 """
@@ -32,7 +37,7 @@ import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
 from kesbrdf.render import sampling as _sampling
-from kesbrdf.render.bsdf import AZIMUTH_EPS, parse_rgb
+from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, parse_rgb
 
 __all__ = ["HalfDiffBSDF", "register", "check_halfdiff_model"]
 
@@ -75,6 +80,12 @@ class HalfDiffBSDF(mi.BSDF):
         table = np.clip(np.nan_to_num(table * tint), 0.0, None)
         self.sqrtcos = model.parameters.get("normalisation", "sqrtcos") == "sqrtcos"
         self.two_sided = bool(_prop(props, "two_sided", False))
+        self.extrapolation = str(_prop(props, "extrapolation", "hold"))
+        if self.extrapolation not in EXTRAPOLATIONS:
+            raise ModelError(
+                f"kesbrdf_halfdiff BSDF: unknown extrapolation {self.extrapolation!r}; "
+                f"expected one of {', '.join(EXTRAPOLATIONS)}"
+            )
         n_phi, n_h, n_d = table.shape[:3]
         self.n_phi, self.n_h, self.n_d = n_phi, n_h, n_d
         self.h_max = float(model.theta_h_grid[-1])
@@ -126,6 +137,8 @@ class HalfDiffBSDF(mi.BSDF):
         pos = mi.Point3f((w + 0.5) / self.n_d, (v + 0.5) / self.n_h, (u + 0.5) / (self.n_phi + 1))
         r, g, b = self.texture.eval(pos)
         q = mi.Color3f(r, g, b)
+        if self.extrapolation == "fade":
+            q = q * dr.clip(1.0 - (theta_h - self.h_max) * (2.0 / math.radians(FADE_DEG)), 0.0, 1.0)
         if self.sqrtcos:
             q = q * dr.rsqrt(dr.maximum(wi.z * wr.z, 1e-20))
         return dr.select(above, self.body + q, 0.0)
