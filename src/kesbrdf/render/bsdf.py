@@ -203,8 +203,7 @@ class KesBSDF(mi.BSDF):
         else:
             lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, model.gamma_grid)
             diffuse = math.pi * float(np.mean(body))
-            share = lobe / (lobe + diffuse) if lobe + diffuse > 0 else 0.5
-            weight = min(max(share, _sampling.MIN_LOBE_WEIGHT), _sampling.MAX_LOBE_WEIGHT)
+            weight = _sampling.lobe_weight(lobe, diffuse)
         self.sampling = sampling
         self.sampler = _sampling.LobeSampler(
             _sampling.lobe_density_table(q_mean, model.gamma_grid, mapping),

@@ -425,8 +425,7 @@ def _make_sampler(ref, sampling: str) -> _sampling.LobeSampler:
     else:
         lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, model.gamma_grid)
         diffuse = math.pi * float(np.mean(model.body))
-        share = lobe / (lobe + diffuse) if lobe + diffuse > 0 else 0.5
-        weight = min(max(share, _sampling.MIN_LOBE_WEIGHT), _sampling.MAX_LOBE_WEIGHT)
+        weight = _sampling.lobe_weight(lobe, diffuse)
     sampler = _sampling.LobeSampler(
         _sampling.lobe_density_table(q_mean, model.gamma_grid, "deviation"),
         float(model.gamma_grid[-1]),

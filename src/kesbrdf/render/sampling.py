@@ -32,9 +32,15 @@ and is sampled with a two-component mixture, given the viewer direction ω_r
 * **cosine** (probability 1 − w): cosine-weighted hemisphere, for the body term.
 
 The mixture pdf is ``w·p_lobe + (1 − w)·cos θ_i/π``; it is positive wherever
-f_r cos θ_i is, so the estimator is unbiased.  ``w`` is the share of the lobe's
-directional-albedo proxy ∫q dω in the total (lobe + π·c), clamped to
-[:data:`MIN_LOBE_WEIGHT`, :data:`MAX_LOBE_WEIGHT`] so neither component vanishes.
+f_r cos θ_i is, so the estimator is unbiased.  ``w`` (:func:`lobe_weight`) comes from
+s, the share of the lobe's directional-albedo proxy ∫q dω in the total (lobe + π·c):
+w = 1 − (1 − s)², clamped to [:data:`MIN_LOBE_WEIGHT`, :data:`MAX_LOBE_WEIGHT`] so
+neither component vanishes.  The cosine technique's probability falls with the square
+of the body's share because the body is smooth (any technique samples it with low
+variance, and in a path tracer emitter sampling covers it through MIS) while the
+lobe's variance grows with its peakedness.  Measured on the benchmark's draped satin
+(s = 0.86): image RMSE / cosine sampling 0.319 with w = s, 0.300 with w = 0.95, 0.296
+with w = 0.99, 0.362 with w = 0.7.
 """
 
 from __future__ import annotations
@@ -46,11 +52,19 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["LobeSampler", "lobe_density_table", "alias_table", "MIN_LOBE_WEIGHT", "MAX_LOBE_WEIGHT"]
+__all__ = ["LobeSampler", "lobe_density_table", "lobe_weight", "alias_table", "MIN_LOBE_WEIGHT", "MAX_LOBE_WEIGHT"]
 
 #: Smallest / largest probability of the lobe component (keeps both techniques alive).
 MIN_LOBE_WEIGHT = 0.1
-MAX_LOBE_WEIGHT = 0.95
+MAX_LOBE_WEIGHT = 0.98
+
+
+def lobe_weight(lobe_albedo: float, body_albedo: float) -> float:
+    """Probability of the lobe component from the two albedos (module docstring)."""
+    total = lobe_albedo + body_albedo
+    share = lobe_albedo / total if total > 0 else 0.5
+    w = 1.0 - (1.0 - share) ** 2
+    return min(max(w, MIN_LOBE_WEIGHT), MAX_LOBE_WEIGHT)
 
 
 def lobe_density_table(q_mean: np.ndarray, gamma_grid: np.ndarray, mapping: str) -> np.ndarray:
