@@ -139,3 +139,36 @@ def test_demo_comparisons_step(render_module, tmp_path, monkeypatch):
     assert [c["protocol"] for c in out] == ["paper", "dense"]
     assert all((tmp_path / "compare" / f"satin-ward_{p}.png").is_file() for p in ("paper", "dense"))
     assert len(said) == 2
+
+
+def test_halfdiff_fade_changes_only_beyond_the_measured_half_angles(render_module, rng, tmp_path):
+    import drjit as dr
+    import mitsuba as mi
+
+    from kesbrdf.geometry import spherical_to_cartesian
+    from kesbrdf.gonio import measure
+    from kesbrdf.halfdiff import fit_halfdiff, to_half_diff
+    from kesbrdf.references.ward import AnisotropicWard
+
+    model = fit_halfdiff(measure(AnisotropicWard(0.2, 0.4, rho_d=0.1, rho_s=0.3), protocol="dense"))
+    path = tmp_path / "m.kes.json"
+    model.save(path)
+    n = 3000
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wi, wr = wi.astype(np.float32).astype(float), wr.astype(np.float32).astype(float)
+    out = {}
+    for ex in ("hold", "fade"):
+        bsdf = mi.load_dict({"type": "kesbrdf_halfdiff", "filename": str(path), "extrapolation": ex})
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = mi.Vector3f(*wr.T)
+        out[ex] = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T / wi[:, 2:3]
+    _, theta_h, _ = to_half_diff(wi, wr)
+    h_max = model.theta_h_grid[-1]
+    inside = theta_h < h_max - 1e-4
+    beyond = theta_h > h_max + np.radians(3.0) + 1e-4
+    assert inside.sum() > 100 and beyond.sum() > 100
+    np.testing.assert_array_equal(out["fade"][inside], out["hold"][inside])
+    np.testing.assert_allclose(out["fade"][beyond], np.broadcast_to(model.body, out["fade"][beyond].shape), rtol=1e-5)
+    with pytest.raises(Exception, match="extrapolation"):
+        mi.load_dict({"type": "kesbrdf_halfdiff", "filename": str(path), "extrapolation": "mirror"})
