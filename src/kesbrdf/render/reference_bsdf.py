@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -74,10 +75,17 @@ RGL_FILES = {
     "rgl-felt-pink": "acrylic_felt_pink_rgb.bsdf",
     "rgl-felt-purple": "acrylic_felt_purple_rgb.bsdf",
 }
-#: Where RGL files are looked for (the repository's test data, then the data share).
-RGL_DIRS = (
-    Path(__file__).resolve().parents[3] / "tests" / "data" / "rgl",
-    Path("/work/shared/data/rgl"),
+#: Where RGL files are looked for: ``$KESBRDF_RGL_DIR`` when set, the source tree's
+#: test data (white felt, CC0, shipped), then the project's data share (as
+#: benchmarks/bench_rgl.py).
+RGL_DIRS = tuple(
+    Path(p)
+    for p in (
+        os.environ.get("KESBRDF_RGL_DIR", ""),
+        str(Path(__file__).resolve().parents[3] / "tests" / "data" / "rgl"),
+        "/work/shared/data/rgl",
+    )
+    if p
 )
 #: Every reference that can be rendered: the CLI's analytic ones, every Sadeghi preset,
 #: the virtual black satin, and the RGL felts.
