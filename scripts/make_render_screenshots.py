@@ -14,7 +14,6 @@ import json
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 OUT = Path(__file__).resolve().parent.parent / "docs" / "screenshots"
 
