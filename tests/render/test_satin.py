@@ -175,3 +175,9 @@ def test_black_satin_side_by_side_fade_is_closer(render_module):
          for ex in ("hold", "fade")}
     assert r["fade"]["flip"] < r["hold"]["flip"] - 0.05, {k: v["flip"] for k, v in r.items()}
     assert r["fade"]["rel_rmse"] < 0.8 * r["hold"]["rel_rmse"], {k: v["rel_rmse"] for k, v in r.items()}
+
+
+def test_parse_measured_colourway():
+    from kesbrdf.render.colourways import parse_colourways
+
+    assert parse_colourways("black=measured;red=0.5,0,0") == [("black", None), ("red", (0.5, 0.0, 0.0))]
