@@ -15,7 +15,8 @@ def add_arguments(p):
                    help="garment scene (default dressform)")
     p.add_argument("--drape", metavar="DRAPE_DIR", default=None, help="render this drape folder's last frame")
     p.add_argument("--colours", default=None, metavar="NAME=R,G,B;...",
-                   help="body albedos in [0,1], at least 6 (default: ivory, crimson, emerald, navy, gold, plum, teal, black)")
+                   help="body albedos in [0,1] (NAME=measured keeps the measured body), at least 6 "
+                        "(default: ivory, crimson, emerald, navy, gold, plum, teal, black = measured)")
     p.add_argument("--columns", type=int, default=4, help="tiles per row (default 4)")
     add_render_options(p, spp=32, resolution="200x240")
 

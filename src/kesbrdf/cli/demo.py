@@ -91,6 +91,8 @@ def run(args) -> int:
             text = ", ".join(f"{k}: {v:.2f}" for k, v in cases.items())
             stderr(f"    RMSE ratio KES / {base}: {text}")
 
+    comparisons = [] if args.quick else _comparisons(out, reference, say)
+
     # figures + report
     if _have("matplotlib") and _have("kesbrdf.plotting.report"):
         from kesbrdf.plotting import report as report_mod
@@ -105,6 +107,7 @@ def run(args) -> int:
             diagnostics=summary["diagnostics"],
             title="kesbrdf demo: virtual black satin",
             figure_dir=out / "figures",
+            comparisons=comparisons,
         )
     else:
         say("figures + report skipped (install kesbrdf[plot])")
@@ -144,6 +147,26 @@ def _exports(out: Path, model, say) -> None:
         say(f"export {fmt}: {result.paths[0]} ({size:.1f} MiB); open with: {result.open_with}")
     if summary:
         write_text(out / "exports" / "exports.json", json.dumps(summary, indent=1) + "\n")
+
+
+def _comparisons(out: Path, reference, say) -> list:
+    """Reference vs model renders of the embedded fabric (paper and dense protocols)."""
+    if not (_have("mitsuba") and _have("flip_evaluator") and _have("kesbrdf.render.compare")):
+        say("reference-vs-model renders skipped (install kesbrdf[render] and flip-evaluator)")
+        return []
+    from kesbrdf.references.sadeghi2013 import Sadeghi2013
+    from kesbrdf.render import compare
+
+    name = "sadeghi-black-satin" if isinstance(reference, Sadeghi2013) else "satin-ward"
+    results = []
+    for protocol in compare.PROTOCOLS:
+        say(f"compare: {name} rendered by itself and by its {protocol}-protocol model")
+        r = compare.compare_render(name, protocol, "sphere", compare.default_options(spp=32),
+                                   output=out / "compare" / f"{name}_{protocol}.png")
+        stderr(f"    FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
+               f"(noise floor {r['noise_flip']:.3f}, {r['noise_rel_rmse']:.3f})")
+        results.append({k: v for k, v in r.items() if not k.startswith("_")})
+    return results
 
 
 def _renders(out: Path, model_path: Path, say) -> None:

@@ -34,6 +34,7 @@ COMMANDS: dict[str, str] = {
     "drape": "drape",
     "colourways": "colourways",
     "export": "export",
+    "compare-render": "compare_render",
     "view": "view",
     "demo": "demo",
     "batch": "batch",

@@ -49,6 +49,8 @@ def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
                    help="(phi, gamma) mapping (docs/formats.md); 'paper' is not renderable")
     p.add_argument("--one-sided", action="store_true", help="shade back faces black (default: two-sided cloth)")
     p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for PNG/JPEG output")
+    p.add_argument("--extrapolation", choices=("fade", "hold"), default="fade",
+                   help="lobe beyond the last measured deviation: fade to the body (default) or hold (docs/formats.md)")
     p.add_argument("--max-depth", type=int, default=4, help="path length (default 4)")
     p.add_argument("--seed", type=int, default=0, help="sampler seed")
 
@@ -67,6 +69,7 @@ def render_options(args, **extra):
         max_depth=args.max_depth,
         seed=args.seed,
         exposure=args.exposure,
+        extrapolation=args.extrapolation,
         **extra,
     ).validate()
 

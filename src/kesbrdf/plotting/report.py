@@ -329,6 +329,36 @@ def _figure_html(name: str, data: bytes) -> str:
     )
 
 
+def _comparisons_html(comparisons) -> str:
+    """Section embedding reference-vs-model render panels (:mod:`kesbrdf.render.compare`).
+
+    ``comparisons``: sequence of dicts with ``panel`` (a PNG path) and the numbers
+    ``reference``, ``protocol``, ``flip``, ``rel_rmse`` (``noise_flip``/``noise_rel_rmse``
+    optional); entries whose panel file is missing are skipped.
+    """
+    items = []
+    for c in comparisons or ():
+        panel = Path(str(c.get("panel", "")))
+        if not panel.is_file():
+            continue
+        b64 = base64.b64encode(panel.read_bytes()).decode("ascii")
+        cap = (f"{c.get('reference')} ({c.get('protocol')} protocol, {c.get('scene', 'sphere')}): "
+               f"FLIP {float(c['flip']):.3f}, relative RMSE {float(c['rel_rmse']):.3f}")
+        if "noise_flip" in c:
+            cap += f"; noise floor FLIP {float(c['noise_flip']):.3f}, relative RMSE {float(c['noise_rel_rmse']):.3f}"
+        items.append(
+            f'<figure class="compare"><img alt="reference vs model {html.escape(str(c.get("reference")))}" '
+            f'src="data:image/png;base64,{b64}"><figcaption>{html.escape(cap)}</figcaption></figure>'
+        )
+    if not items:
+        return ""
+    intro = ("<p>The same scene rendered with the reference BRDF itself (left) and with the KES model "
+             "fitted from its virtual measurements (middle); right, the FLIP error map (0 black, 1 "
+             "yellow). FLIP and relative RMSE are over the cloth pixels; the noise floor is the same "
+             "comparison between two seeds of the reference.</p>")
+    return "<h2 id=renders>Reference vs model renders</h2>" + intro + "".join(items)
+
+
 def build_report(
     model=None,
     measurement=None,
@@ -341,6 +371,7 @@ def build_report(
     figure_format: str = "png",
     dpi: int = 90,
     figure_options: dict | None = None,
+    comparisons=None,
 ) -> str:
     """The report as one HTML string (see :func:`write_report` for the parameters)."""
     from kesbrdf.plotting.figures import make_figure
@@ -387,6 +418,8 @@ def build_report(
         parts.append(_figure_html(name, figure_bytes(fig, "png", dpi=dpi)))
         if figure_dir is not None:
             save_figure(fig, Path(figure_dir) / f"fig{name}.{figure_format}")
+
+    parts.append(_comparisons_html(comparisons))
 
     # -- metrics and diagnostics
     if metrics is not None:
@@ -439,6 +472,7 @@ def write_report(
     figure_format: str = "png",
     dpi: int = 90,
     figure_options: dict | None = None,
+    comparisons=None,
 ) -> Path:
     """Write one self-contained HTML report atomically.
 
@@ -465,6 +499,9 @@ def write_report(
         Resolution of the embedded PNGs.
     figure_options : dict, optional
         Figure name -> keyword arguments for its ``figure_*`` builder.
+    comparisons : sequence of dict, optional
+        Reference-vs-model render panels to embed (``panel`` path + numbers, as returned
+        by :func:`kesbrdf.render.compare.compare_render`); missing panels are skipped.
 
     Returns
     -------
@@ -472,7 +509,7 @@ def write_report(
     """
     text = build_report(
         model, measurement, reference, metrics, diagnostics, title, figures, figure_dir,
-        figure_format, dpi, figure_options,
+        figure_format, dpi, figure_options, comparisons,
     )
     return write_text(path, text)
 

@@ -28,4 +28,12 @@ from kesbrdf.render.bsdf import KesBSDF, register  # noqa: E402
 
 register()
 
+from kesbrdf.render import reference_bsdf as _reference_bsdf  # noqa: E402
+
+_reference_bsdf.register()
+
+from kesbrdf.render import halfdiff_bsdf as _halfdiff_bsdf  # noqa: E402
+
+_halfdiff_bsdf.register()
+
 __all__ = ["KesBSDF", "register", "VARIANT"]

@@ -41,6 +41,15 @@ two_sided : bool
 sampling : str
     ``lobe`` (default, the mixture of :mod:`kesbrdf.render.sampling`) or ``cosine``
     (cosine-weighted only; a baseline for the benchmark).
+extrapolation : str
+    What the lobe does beyond the last measured deviation γ_max (84° in the paper's
+    protocol).  ``hold`` (default) keeps the last column, exactly as
+    :func:`kesbrdf.brdf.evaluate` and ``docs/formats.md``; ``fade`` scales it by
+    max(0, 1 − (γ − γ_max)/Δ) with Δ = :data:`FADE_DEG` (one deviation step of the
+    paper's protocol), so pairs the measurement never came near get the body only.
+    Holding the column puts the in-plane grazing value (θ_i = 3°, θ_r = 87°) on every
+    retro-reflection pair; on the virtual black satin it doubles the render error
+    against the reference (docs/rendering.md, "Satin findings").
 
 Models with one channel are used grey; three channels are taken as RGB.
 """
@@ -65,6 +74,9 @@ MAPPINGS = ("deviation", "halfvector")
 #: Model kinds the plugin evaluates (the ``kes`` table).
 SUPPORTED_KINDS = ("kes",)
 SAMPLINGS = ("lobe", "cosine")
+EXTRAPOLATIONS = ("hold", "fade")
+#: Width of the fade beyond γ_max of ``extrapolation="fade"``, degrees.
+FADE_DEG = 6.0
 #: Projected length below which the azimuth falls back to the plane of incidence
 #: (float32 counterpart of kesbrdf.brdf.AZIMUTH_EPS).
 AZIMUTH_EPS = 1e-7
@@ -153,6 +165,12 @@ class KesBSDF(mi.BSDF):
         sampling = str(_prop(props, "sampling", "lobe"))
         validate_choice("kesbrdf BSDF sampling", sampling, SAMPLINGS, error=ModelError)
         self.two_sided = bool(_prop(props, "two_sided", False))
+        extrapolation = str(_prop(props, "extrapolation", "hold"))
+        if extrapolation not in EXTRAPOLATIONS:
+            raise ModelError(
+                f"kesbrdf BSDF: unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}"
+            )
+        self.extrapolation = extrapolation
 
         table, body = model_rgb(model, path)
         tint = parse_rgb(_prop(props, "lobe_tint", "1,1,1"), "lobe_tint")
@@ -185,8 +203,7 @@ class KesBSDF(mi.BSDF):
         else:
             lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, model.gamma_grid)
             diffuse = math.pi * float(np.mean(body))
-            share = lobe / (lobe + diffuse) if lobe + diffuse > 0 else 0.5
-            weight = min(max(share, _sampling.MIN_LOBE_WEIGHT), _sampling.MAX_LOBE_WEIGHT)
+            weight = _sampling.lobe_weight(lobe, diffuse)
         self.sampling = sampling
         self.sampler = _sampling.LobeSampler(
             _sampling.lobe_density_table(q_mean, model.gamma_grid, mapping),
@@ -228,7 +245,10 @@ class KesBSDF(mi.BSDF):
         v = dr.clip(v, 0.0, float(self.n_gamma - 1))
         pos = mi.Point2f((v + 0.5) / self.n_gamma, (u + 0.5) / (self.n_phi + 1))
         r, g, b = self.texture.eval(pos)
-        return mi.Color3f(r, g, b)
+        q = mi.Color3f(r, g, b)
+        if self.extrapolation == "fade":
+            q = q * dr.clip(1.0 - (gamma - self.gamma_max) * (1.0 / math.radians(FADE_DEG)), 0.0, 1.0)
+        return q
 
     def f_r(self, wi, wr, active=True):
         """f_r (1/sr, no cosine) for light ω_i and viewer ω_r in the fabric frame."""

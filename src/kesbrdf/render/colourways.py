@@ -3,6 +3,13 @@
 Every tile uses the same model, scene, light and camera; only ``base_color`` (the
 Lambertian albedo of the dyed body) changes, so the measured lobe, which carries the
 gloss and the anisotropy, is identical in every tile.
+
+A colourway whose colour is ``None`` (written ``name=measured`` in
+:func:`parse_colourways`) keeps the *measured* body: the default ``black`` tile is the
+measured black satin itself, not a guessed near-black.  The lobe is neutral when the
+measurement is (the virtual black satin's is, R = G = B), so a dyed satin keeps a white
+sheen over its coloured body; :func:`colourway_values` returns the BSDF values the tests
+check this on.
 """
 
 from __future__ import annotations
@@ -17,10 +24,10 @@ from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.render import scenes as _scenes
 
-__all__ = ["DEFAULT_COLOURWAYS", "parse_colourways", "render_colourways", "MIN_COLOURWAYS"]
+__all__ = ["DEFAULT_COLOURWAYS", "parse_colourways", "render_colourways", "MIN_COLOURWAYS", "colourway_values"]
 
-#: Body albedos (linear RGB) of the default colourways.
-DEFAULT_COLOURWAYS: list[tuple[str, tuple[float, float, float]]] = [
+#: Body albedos (linear RGB) of the default colourways; None = the measured body.
+DEFAULT_COLOURWAYS: list[tuple[str, tuple[float, float, float] | None]] = [
     ("ivory", (0.80, 0.74, 0.62)),
     ("crimson", (0.50, 0.02, 0.05)),
     ("emerald", (0.02, 0.32, 0.13)),
@@ -28,7 +35,7 @@ DEFAULT_COLOURWAYS: list[tuple[str, tuple[float, float, float]]] = [
     ("gold", (0.72, 0.45, 0.06)),
     ("plum", (0.28, 0.04, 0.22)),
     ("teal", (0.02, 0.28, 0.30)),
-    ("black", (0.015, 0.015, 0.015)),
+    ("black", None),
 ]
 MIN_COLOURWAYS = 6
 
@@ -42,6 +49,9 @@ def parse_colourways(text: str) -> list[tuple[str, tuple[float, float, float]]]:
         name, sep, rgb = item.partition("=")
         if not sep:
             name, rgb = f"colour {k + 1}", item
+        if rgb.strip().lower() == "measured":
+            out.append((name.strip(), None))
+            continue
         albedo = parse_rgb(rgb, f"colourway {name.strip()!r}")
         if albedo.max() > 1:
             raise KesbrdfError(f"colourway {name.strip()!r}: expected a body albedo with R,G,B in [0, 1], got {rgb!r}")
@@ -72,11 +82,11 @@ def render_colourways(model_path, output, opts: "_scenes.RenderOptions", scene: 
         drape = _scenes.read_drape(drape)
     tiles = []
     for k, (name, rgb) in enumerate(colourways):
-        o = replace(opts, base_color=tuple(rgb))
+        o = replace(opts, base_color=None if rgb is None else tuple(rgb))
         img = _scenes.render_scene(_scenes.load_scene(model_path, scene, o, drape=drape), o)
         tile = Image.fromarray(_scenes.to_srgb8(img, opts.exposure))
         draw = ImageDraw.Draw(tile)
-        label = f"{name}  ({', '.join(f'{c:.2f}' for c in rgb)})"
+        label = f"{name}  (measured body)" if rgb is None else f"{name}  ({', '.join(f'{c:.2f}' for c in rgb)})"
         draw.rectangle([0, tile.height - 16, tile.width, tile.height], fill=(0, 0, 0))
         draw.text((4, tile.height - 14), label, fill=(235, 235, 235))
         tiles.append(tile)
@@ -89,7 +99,7 @@ def render_colourways(model_path, output, opts: "_scenes.RenderOptions", scene: 
     for k, tile in enumerate(tiles):
         sheet.paste(tile, ((k % columns) * w, (k // columns) * h))
     meta = _scenes.provenance(model_path, scene, opts, drape)
-    meta["colourways"] = [{"name": n, "base_color": list(c)} for n, c in colourways]
+    meta["colourways"] = [{"name": n, "base_color": None if c is None else list(c)} for n, c in colourways]
     info = PngInfo()
     info.add_text("kesbrdf", json.dumps(meta, default=str))
     output = Path(output)
@@ -108,3 +118,41 @@ def tile_means(sheet_path, n: int, columns: int = 4) -> np.ndarray:
     rows = -(-n // columns)
     h, w = a.shape[0] // rows, a.shape[1] // min(columns, n)
     return np.array([a[(k // columns) * h:(k // columns + 1) * h - 16, (k % columns) * w:(k % columns + 1) * w].reshape(-1, 3).mean(0) for k in range(n)])
+
+
+def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation") -> dict:
+    """f_r of each colourway through the ``kesbrdf`` plugin, split into body and lobe.
+
+    Parameters
+    ----------
+    colourways : list of (name, rgb or None)
+    wi, wr : ndarray (N, 3)
+        Light and viewer directions in the fabric frame (upper hemisphere).
+
+    Returns
+    -------
+    dict
+        name -> {"f": (N, 3) f_r in 1/sr, "body": (3,) the body term used (base/π, or
+        the measured body when rgb is None), "lobe": f − body}.
+    """
+    import drjit as dr
+    import mitsuba as mi
+
+    from kesbrdf.model import load
+    from kesbrdf.render.bsdf import model_rgb
+
+    _, measured = model_rgb(load(model_path), model_path)
+    wi = np.asarray(wi, float)
+    wr = np.asarray(wr, float)
+    out = {}
+    for name, rgb in colourways:
+        d = {"type": "kesbrdf", "filename": str(model_path), "mapping": mapping}
+        if rgb is not None:
+            d["base_color"] = ",".join(f"{float(c):.9g}" for c in rgb)
+        bsdf = mi.load_dict(d)
+        si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+        si.wi = mi.Vector3f(*wr.T)
+        f = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T)), float).T / wi[:, 2:3]
+        body = np.asarray(measured, float) if rgb is None else np.asarray(rgb, float) / np.pi
+        out[name] = {"f": f, "body": body, "lobe": f - body}
+    return out

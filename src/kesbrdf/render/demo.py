@@ -15,8 +15,11 @@ from kesbrdf.render import scenes as _scenes
 
 __all__ = ["run_demo", "DEMO_COLOUR"]
 
-#: Body colour of the demo satin (a deep red, DESIGN §5: "arbitrarily coloured satin").
-DEMO_COLOUR = (0.45, 0.03, 0.06)
+#: Body colour of the demo stills: None = the measured body.  The embedded fabric is a
+#: black satin; a 0.45 red body (the former value) is as bright as its 0.19 1/sr sheen
+#: and rendered it pink and matte (docs/rendering.md, "Satin findings").  Dyed
+#: versions ("arbitrarily coloured satin", DESIGN §5) are the colourway sheet's job.
+DEMO_COLOUR = None
 
 
 def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=None) -> dict:

@@ -7,11 +7,16 @@ The BSDF (see :mod:`kesbrdf.render.bsdf`) is a body term plus the KES lobe
 and is sampled with a two-component mixture, given the viewer direction ω_r
 (Mitsuba's ``si.wi``):
 
-* **lobe** (probability ``w``): a point (γ, φ) is drawn from the tabulated 2-D
-  density ``p(γ, φ) ∝ q̄(φ, γ)·J(γ)`` (``mi.MarginalContinuous2D0``, bilinear and
-  continuous, periodic in φ through a repeated first row), where q̄ is the channel
-  mean of the tinted lobe and J the solid-angle Jacobian of the mapping, so that the
-  solid-angle density of the light direction is close to proportional to q.
+* **lobe** (probability ``w``): a cell of the (φ, γ) grid is drawn with probability
+  equal to its share of ∫ q̄ dω (the trapezoid rule on the nodes of q̄·J, J the
+  solid-angle Jacobian of the mapping; q̄ the channel mean of the tinted lobe), by
+  Walker's alias method: one uniform picks the cell in O(1), two gathers, no search.
+  Within the cell the direction is uniform in solid angle (uniform in φ and in cos γ,
+  or in cos θ_h for ``halfvector``), so the solid-angle pdf is piecewise constant:
+  the cell's probability over its solid angle, one gather to evaluate.  (Before, a
+  bilinear ``mi.MarginalContinuous2D0`` did the same job with two binary searches and
+  a quadratic per sample: 60 ms per million samples against 15 ms here, which made
+  the plugin's sampling slower than ``roughconductor``'s.)
   The (γ, φ) point becomes a light direction ω_i:
 
   - ``deviation``: v = the point at angle γ from ω_r, azimuth α = φ + π in the frame
@@ -19,7 +24,7 @@ and is sampled with a two-component mixture, given the viewer direction ω_r
     ω_i = (−v.x, −v.y, v.z) (the mirror image, an isometry).  Near normal viewing α
     is exactly the deviation azimuth of the model; elsewhere it is close, and the
     pdf below is exact in any case.  J = sin γ.
-  - ``halfvector``: the half vector h at polar angle γ/2 and azimuth φ (exact),
+  - ``halfvector``: the half vector h at polar angle θ_h = γ/2 and azimuth φ (exact),
     ω_i = reflect(ω_r, h); p(ω_i) = p(h)/(4 ω_r·h).  J = sin(γ/2).
 
   Lobe samples beyond γ_max (the last measured deviation, where the table is held
@@ -27,9 +32,15 @@ and is sampled with a two-component mixture, given the viewer direction ω_r
 * **cosine** (probability 1 − w): cosine-weighted hemisphere, for the body term.
 
 The mixture pdf is ``w·p_lobe + (1 − w)·cos θ_i/π``; it is positive wherever
-f_r cos θ_i is, so the estimator is unbiased.  ``w`` is the share of the lobe's
-directional-albedo proxy ∫q dω in the total (lobe + π·c), clamped to
-[:data:`MIN_LOBE_WEIGHT`, :data:`MAX_LOBE_WEIGHT`] so neither component vanishes.
+f_r cos θ_i is, so the estimator is unbiased.  ``w`` (:func:`lobe_weight`) comes from
+s, the share of the lobe's directional-albedo proxy ∫q dω in the total (lobe + π·c):
+w = 1 − (1 − s)², clamped to [:data:`MIN_LOBE_WEIGHT`, :data:`MAX_LOBE_WEIGHT`] so
+neither component vanishes.  The cosine technique's probability falls with the square
+of the body's share because the body is smooth (any technique samples it with low
+variance, and in a path tracer emitter sampling covers it through MIS) while the
+lobe's variance grows with its peakedness.  Measured on the benchmark's draped satin
+(s = 0.86): image RMSE / cosine sampling 0.319 with w = s, 0.300 with w = 0.95, 0.296
+with w = 0.99, 0.362 with w = 0.7.
 """
 
 from __future__ import annotations
@@ -41,14 +52,19 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-__all__ = ["LobeSampler", "lobe_density_table", "MIN_LOBE_WEIGHT", "MAX_LOBE_WEIGHT"]
+__all__ = ["LobeSampler", "lobe_density_table", "lobe_weight", "alias_table", "MIN_LOBE_WEIGHT", "MAX_LOBE_WEIGHT"]
 
 #: Smallest / largest probability of the lobe component (keeps both techniques alive).
 MIN_LOBE_WEIGHT = 0.1
-MAX_LOBE_WEIGHT = 0.95
-#: Below this sin γ the solid-angle density is evaluated at this value (γ → 0 is a
-#: point of measure zero; the tabulated density vanishes there like sin γ does).
-MIN_SIN_GAMMA = 1e-6
+MAX_LOBE_WEIGHT = 0.98
+
+
+def lobe_weight(lobe_albedo: float, body_albedo: float) -> float:
+    """Probability of the lobe component from the two albedos (module docstring)."""
+    total = lobe_albedo + body_albedo
+    share = lobe_albedo / total if total > 0 else 0.5
+    w = 1.0 - (1.0 - share) ** 2
+    return min(max(w, MIN_LOBE_WEIGHT), MAX_LOBE_WEIGHT)
 
 
 def lobe_density_table(q_mean: np.ndarray, gamma_grid: np.ndarray, mapping: str) -> np.ndarray:
@@ -84,13 +100,41 @@ def lobe_albedo_proxy(q_mean: np.ndarray, phi_grid: np.ndarray, gamma_grid: np.n
     return float(np.sum(np.clip(q_mean, 0, None) * w[None, :]) * dphi)
 
 
+def alias_table(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Walker/Vose alias table of non-negative ``weights`` (1-D): (prob, alias).
+
+    Bin i is kept with probability ``prob[i]`` and replaced by ``alias[i]`` otherwise;
+    drawing i uniformly then yields bin k with probability weights[k] / Σ weights.
+    """
+    w = np.asarray(weights, float).ravel()
+    n = w.size
+    total = w.sum()
+    if not (n and total > 0 and np.all(np.isfinite(w))):
+        return np.ones(n, np.float32), np.arange(n, dtype=np.uint32)
+    scaled = w * (n / total)
+    prob = np.ones(n)
+    alias = np.arange(n)
+    small = [int(i) for i in np.nonzero(scaled < 1.0)[0]]
+    large = [int(i) for i in np.nonzero(scaled >= 1.0)[0]]
+    while small and large:
+        s_i = small.pop()
+        l_i = large[-1]
+        prob[s_i] = scaled[s_i]
+        alias[s_i] = l_i
+        scaled[l_i] -= 1.0 - scaled[s_i]
+        if scaled[l_i] < 1.0:
+            small.append(large.pop())
+    # what is left is 1 up to rounding
+    return prob.astype(np.float32), alias.astype(np.uint32)
+
+
 class LobeSampler:
     """Mixture sampler (lobe + cosine) of one model; see the module docstring.
 
     Parameters
     ----------
     density : ndarray, shape (n_phi + 1, n_gamma)
-        From :func:`lobe_density_table`.
+        From :func:`lobe_density_table` (nodes of q̄·J; row n_phi repeats row 0).
     gamma_max : float
         Largest tabulated γ, radians.
     mapping : {"deviation", "halfvector"}
@@ -102,9 +146,28 @@ class LobeSampler:
         self.mapping = mapping
         self.gamma_max = float(gamma_max)
         self.lobe_weight = float(lobe_weight)
-        self.distr = mi.MarginalContinuous2D0(density, normalize=True)
-        # density per unit square -> per (γ, φ) in radians
-        self.scale = 1.0 / (self.gamma_max * 2.0 * math.pi)
+        d = np.clip(np.nan_to_num(np.asarray(density, float)), 0.0, None)
+        n_phi, n_gamma = d.shape[0] - 1, d.shape[1] - 1  # cells
+        self.n_phi, self.n_gamma = n_phi, n_gamma
+        # trapezoid rule of q̄·J over each (φ, γ) cell: ∝ ∫ q̄ dω over the cell
+        mass = 0.25 * (d[:-1, :-1] + d[1:, :-1] + d[:-1, 1:] + d[1:, 1:])
+        if not np.any(mass > 0):
+            mass = np.ones_like(mass)
+        mass = mass / mass.sum()
+        # the polar variable of the cells: γ (deviation) or θ_h = γ/2 (halfvector)
+        scale = 1.0 if mapping == "deviation" else 0.5
+        edges = np.linspace(0.0, self.gamma_max, n_gamma + 1) * scale
+        cos_edges = np.cos(edges)
+        solid = (2.0 * math.pi / n_phi) * (cos_edges[:-1] - cos_edges[1:])  # per γ cell
+        pdf = mass / solid[None, :]
+        prob, alias = alias_table(mass.ravel())  # flat index = j_phi * n_gamma + k_gamma
+        self.prob = mi.Float(prob)
+        self.alias = mi.UInt32(alias)
+        self.cell_pdf = mi.Float(pdf.ravel().astype(np.float32))
+        self.cos_lo = mi.Float(cos_edges[:-1].astype(np.float32))
+        self.cos_hi = mi.Float(cos_edges[1:].astype(np.float32))
+        self.polar_scale = scale
+        self.n_cells = n_phi * n_gamma
 
     # -- frames -----------------------------------------------------------------
     @staticmethod
@@ -118,20 +181,43 @@ class LobeSampler:
         t2 = dr.cross(wr, t1)
         return t1, t2
 
-    # -- lobe ------------------------------------------------------------------
+    # -- the tabulated lobe ------------------------------------------------------
+    def _sample_cell(self, u2):
+        """(φ, polar angle) from u2: alias draw of a cell, uniform solid angle inside."""
+        x = u2.x * self.n_cells
+        i = mi.UInt32(dr.clip(dr.floor(x), 0, self.n_cells - 1))
+        frac = x - mi.Float(i)
+        p = dr.gather(mi.Float, self.prob, i)
+        keep = frac < p
+        cell = dr.select(keep, i, dr.gather(mi.UInt32, self.alias, i))
+        # reuse the leftover of the uniform for the position along φ
+        u_phi = dr.select(keep, frac / dr.maximum(p, 1e-30), (frac - p) / dr.maximum(1.0 - p, 1e-30))
+        u_phi = dr.clip(u_phi, 0.0, 0.99999994)
+        j = cell // self.n_gamma
+        k = cell - j * self.n_gamma
+        phi = (mi.Float(j) + u_phi) * (2.0 * math.pi / self.n_phi)
+        c0 = dr.gather(mi.Float, self.cos_lo, k)
+        c1 = dr.gather(mi.Float, self.cos_hi, k)
+        cos_t = c0 - u2.y * (c0 - c1)
+        return phi, cos_t
+
+    def _cell_pdf(self, phi, polar):
+        """Solid-angle pdf of the cell holding (φ, polar angle), 0 beyond the table."""
+        j = mi.UInt32(dr.clip(dr.floor(phi * (self.n_phi / (2.0 * math.pi))), 0, self.n_phi - 1))
+        t = polar * (self.n_gamma / (self.gamma_max * self.polar_scale))
+        k = mi.UInt32(dr.clip(dr.floor(t), 0, self.n_gamma - 1))
+        inside = (t >= 0.0) & (t < self.n_gamma)
+        return dr.select(inside, dr.gather(mi.Float, self.cell_pdf, j * self.n_gamma + k), 0.0)
+
     def _sample_lobe(self, wr, u2):
-        p, _ = self.distr.sample(u2)
-        gamma = p.x * self.gamma_max
-        phi = p.y * (2.0 * math.pi)
+        phi, cos_t = self._sample_cell(u2)
+        sin_t = dr.safe_sqrt(1.0 - cos_t * cos_t)
         if self.mapping == "deviation":
             t1, t2 = self._frame(wr)
-            alpha = phi + math.pi
-            sin_g, cos_g = dr.sincos(gamma)
-            sin_a, cos_a = dr.sincos(alpha)
-            v = cos_g * wr + sin_g * (cos_a * t1 + sin_a * t2)
+            sin_a, cos_a = dr.sincos(phi + math.pi)
+            v = cos_t * wr + sin_t * (cos_a * t1 + sin_a * t2)
             wi = mi.Vector3f(-v.x, -v.y, v.z)
         else:
-            sin_t, cos_t = dr.sincos(0.5 * gamma)
             sin_p, cos_p = dr.sincos(phi)
             h = mi.Vector3f(sin_t * cos_p, sin_t * sin_p, cos_t)
             wi = 2.0 * dr.dot(wr, h) * h - wr
@@ -141,29 +227,20 @@ class LobeSampler:
         if self.mapping == "deviation":
             v = mi.Vector3f(-wi.x, -wi.y, wi.z)
             cos_g = dr.dot(v, wr)
-            sin_g = dr.norm(dr.cross(v, wr))
-            gamma = dr.atan2(sin_g, cos_g)
+            gamma = dr.atan2(dr.norm(dr.cross(v, wr)), cos_g)
             t1, t2 = self._frame(wr)
             d = v - cos_g * wr
-            alpha = dr.atan2(dr.dot(d, t2), dr.dot(d, t1))
-            phi = alpha - math.pi
-            jac = dr.maximum(sin_g, MIN_SIN_GAMMA)
+            phi = dr.atan2(dr.dot(d, t2), dr.dot(d, t1)) - math.pi
             extra = 1.0
+            polar = gamma
         else:
             h = dr.normalize(wi + wr)
-            sin_t = dr.norm(mi.Vector2f(h.x, h.y))
-            gamma = 2.0 * dr.atan2(sin_t, h.z)
+            polar = dr.atan2(dr.norm(mi.Vector2f(h.x, h.y)), h.z)
             phi = dr.atan2(h.y, h.x)
-            # p(γ, φ) dγ dφ -> p(θ_h, φ) = 2 p(γ, φ); solid angle of h: / sin θ_h;
-            # reflection Jacobian: / (4 ω_r·h)
-            jac = dr.maximum(sin_t, MIN_SIN_GAMMA)
-            extra = 2.0 / dr.maximum(4.0 * dr.dot(wr, h), 1e-8)
+            # reflection Jacobian dω_h/dω_i = 1 / (4 ω_r·h)
+            extra = 1.0 / dr.maximum(4.0 * dr.dot(wr, h), 1e-8)
         phi = phi - (2.0 * math.pi) * dr.floor(phi * (1.0 / (2.0 * math.pi)))
-        x = gamma * (1.0 / self.gamma_max)
-        y = phi * (1.0 / (2.0 * math.pi))
-        inside = (x >= 0.0) & (x <= 1.0)
-        dens = self.distr.eval(mi.Point2f(dr.clip(x, 0.0, 1.0), dr.clip(y, 0.0, 1.0)))
-        return dr.select(inside, dens * self.scale * extra / jac, 0.0)
+        return self._cell_pdf(phi, polar) * extra
 
     # -- mixture ---------------------------------------------------------------
     def sample(self, wr, u1, u2):

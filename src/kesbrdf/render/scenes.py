@@ -10,7 +10,8 @@ Scenes (``SCENES``):
     ``uv_rotation_deg=90`` turns the UVs so the warp runs along world z.
 ``drape``
     A drape folder from ``kesbrdf drape`` (one frame and its colliders); without a
-    folder, a procedurally folded sheet over a dome.
+    folder, a procedurally folded sheet over a dome (u = warp across the folds;
+    ``uv_rotation_deg=90`` puts the warp along them).
 ``dressform``
     A dress form built from primitives (ellipsoid torso, neck, pole, base) wearing a
     garment: the drape folder's frame when given, else a procedural flared skirt.
@@ -83,6 +84,9 @@ class RenderOptions:
     uv_rotation_deg: float = 0.0
     exposure: float = 0.0
     floor: bool = True
+    #: lobe beyond the last measured deviation (kesbrdf plugin ``extrapolation``):
+    #: renders fade it (measured closer to the reference satins, docs/rendering.md)
+    extrapolation: str = "fade"
     integrator: dict | None = field(default=None, repr=False)
 
     def validate(self) -> "RenderOptions":
@@ -172,6 +176,8 @@ def bsdf_dict(model_path, opts: RenderOptions) -> dict:
         "two_sided": bool(opts.two_sided),
         "sampling": opts.sampling,
     }
+    if opts.extrapolation != "hold":
+        d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
         d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
     if opts.lobe_tint is not None:
@@ -350,7 +356,8 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
                 if c.is_file():
                     shapes[f"collider_{k}"] = _ply_shape(c, _diffuse((0.5, 0.48, 0.45)), drape.up_axis)
         elif scene == "drape":
-            shapes["cloth"] = _mesh_shape(workdir, "folded", _mesh.folded_cloth(), bsdf)
+            p, n, uv, f = _mesh.folded_cloth()
+            shapes["cloth"] = _mesh_shape(workdir, "folded", (p, n, _mesh.rotate_uv(uv, opts.uv_rotation_deg), f), bsdf)
         else:  # dressform with a procedural skirt
             shapes["cloth"] = _mesh_shape(workdir, "skirt", _mesh.skirt(top=1.0), bsdf)
         if scene == "dressform" and drape is None:

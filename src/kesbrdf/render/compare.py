@@ -1,0 +1,284 @@
+r"""Reference vs model: the same scene rendered with a reference BRDF and with the KES
+model fitted from that reference's virtual measurements, with an error map.
+
+Chain (one call, :func:`compare_render`):
+
+1. ``ref = make_reference(name)`` (:mod:`kesbrdf.render.reference_bsdf`).
+2. Measure it with the virtual gonioreflectometer, :func:`kesbrdf.gonio.measure`:
+
+   - ``protocol="paper"``: the paper's 116 in-plane samples (θ_i + θ_r = 90°, 3° steps,
+     ψ = 0, 45, 90, 135°), fitted with :func:`kesbrdf.model.fit` (kind ``kes``) and
+     rendered by the ``kesbrdf`` plugin (``deviation`` mapping);
+   - ``protocol="dense"``: every in-plane (θ_i, θ_r) pair on a 6° grid (900 samples),
+     fitted with :func:`kesbrdf.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
+     rendered by the ``kesbrdf_halfdiff`` plugin (:mod:`kesbrdf.render.halfdiff_bsdf`).
+
+   Both fits use ``fallback="log"`` (DESIGN §3) and ``body="auto"``.
+3. Render the scene with the reference as the cloth's BSDF (seed s), then with the
+   model (seed s + 1), same camera, lights and spp.  A third render, the reference with
+   seed s + 1, gives the *noise floor*: the same metrics between two renders that differ
+   only in Monte-Carlo noise.  The model's numbers and the floor's then differ only in
+   the BSDF; a model error at the noise floor is not measurable at that spp.
+4. Metrics on the cloth pixels (a mask from one primary ray per pixel centre):
+
+   - **FLIP** (NVIDIA ꟻLIP, ``flip_evaluator``, LDR mode at 67 pixels per degree) on the
+     displayed sRGB images; the mean over cloth pixels, and the map over the image.
+   - **relative RMSE** on linear radiance, ‖M − R‖₂ / ‖R‖₂ over cloth pixels and RGB.
+
+Display: both images are scaled by one exposure chosen on the reference so that its
+99.5th-percentile cloth luminance maps to 0.9 (``exposure="auto"``), then sRGB-encoded.
+A satin's narrow highlight therefore sits just below white and the body shows as the
+dark value it has; the same scale is applied to the model image, so a model that loses
+the highlight looks it.
+
+Outputs: one PNG panel (reference | model | FLIP map, labelled with the numbers) and a
+JSON file with the numbers and how they were made.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from kesbrdf._atomic import atomic_path, write_text
+from kesbrdf.errors import KesbrdfError
+from kesbrdf.render import scenes as _scenes
+from kesbrdf.render.reference_bsdf import make_reference, reference_bsdf_dict  # noqa: F401 (re-exported)
+
+__all__ = [
+    "PROTOCOLS",
+    "DEFAULT_REFERENCES",
+    "default_options",
+    "fit_reference_model",
+    "model_bsdf_dict",
+    "cloth_mask",
+    "flip_mean",
+    "relative_rmse",
+    "auto_exposure",
+    "compare_images",
+    "compare_render",
+    "write_panel",
+]
+
+PROTOCOLS = ("paper", "dense")
+#: References compared by default (the CLI's, the satins, one felt).
+DEFAULT_REFERENCES = ("satin-ward", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin", "rgl-felt-white")
+#: Displayed value of the reference's 99.5th-percentile cloth luminance (auto exposure).
+AUTO_EXPOSURE_TARGET = 0.9
+AUTO_EXPOSURE_QUANTILE = 0.995
+#: Pixels per degree for FLIP (its default: a 0.7 m viewing distance on a 4K 0.7 m monitor).
+FLIP_PPD = 67.0
+_REC709 = np.array([0.2126, 0.7152, 0.0722])
+
+
+def default_options(**kw) -> "_scenes.RenderOptions":
+    """Render options of a comparison: 160x120, 64 spp, area light, no environment."""
+    base = {"spp": 64, "resolution": (160, 120), "env": "none", "light": "area"}
+    base.update(kw)
+    return _scenes.RenderOptions(**base)
+
+
+def fit_reference_model(ref, protocol: str = "paper"):
+    """Measure ``ref`` virtually and fit the model of that protocol; returns (model, n_samples)."""
+    from kesbrdf.gonio import measure
+
+    if protocol not in PROTOCOLS:
+        raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
+    m = measure(ref, protocol=protocol)
+    if protocol == "paper":
+        from kesbrdf.model import fit
+
+        return fit(m, fallback="log"), len(m)
+    from kesbrdf.halfdiff import fit_halfdiff
+
+    return fit_halfdiff(m, fallback="log"), len(m)
+
+
+def model_bsdf_dict(model_path, kind: str, opts: "_scenes.RenderOptions") -> dict:
+    """The plugin entry rendering a saved model of kind ``kes`` or ``kes-halfdiff``."""
+    if kind == "kes":
+        return _scenes.bsdf_dict(model_path, opts)
+    if kind == "kes-halfdiff":
+        d = {"type": "kesbrdf_halfdiff", "filename": str(model_path), "two_sided": bool(opts.two_sided),
+             "sampling": opts.sampling}
+        if opts.base_color is not None:
+            d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
+        if opts.extrapolation != "hold":
+            d["extrapolation"] = opts.extrapolation
+        return d
+    raise KesbrdfError(f"the renderer draws models of kind 'kes' or 'kes-halfdiff', got {kind!r}")
+
+
+def cloth_mask(scene: "mi.Scene", shape_id: str = "cloth") -> np.ndarray:
+    """Boolean (H, W): the primary ray through each pixel centre hits the shape ``shape_id``."""
+    sensor = scene.sensors()[0]
+    w, h = (int(v) for v in sensor.film().size())
+    cloth = [s for s in scene.shapes() if s.id() == shape_id]
+    if not cloth:
+        raise KesbrdfError(f"scene has no shape with id {shape_id!r}")
+    idx = dr.arange(mi.UInt32, w * h)
+    x = mi.Float(idx % w)
+    y = mi.Float(idx // w)
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f((x + 0.5) / w, (y + 0.5) / h), mi.Point2f(0.5))
+    si = scene.ray_intersect(ray)
+    return np.array(si.shape == mi.ShapePtr(cloth[0]), bool).reshape(h, w)
+
+
+def luminance(img: np.ndarray) -> np.ndarray:
+    """Rec. 709 luminance of linear RGB (..., 3)."""
+    return np.asarray(img, float)[..., :3] @ _REC709
+
+
+def auto_exposure(reference: np.ndarray, mask: np.ndarray) -> float:
+    """Exposure in stops putting the reference's bright cloth pixels at the target value."""
+    lum = luminance(reference)[mask] if mask.any() else luminance(reference).ravel()
+    top = float(np.quantile(lum, AUTO_EXPOSURE_QUANTILE)) if lum.size else 0.0
+    return math.log2(AUTO_EXPOSURE_TARGET / top) if top > 0 else 0.0
+
+
+def relative_rmse(test: np.ndarray, reference: np.ndarray, mask: np.ndarray) -> float:
+    """‖test − reference‖₂ / ‖reference‖₂ over the masked pixels and RGB (linear)."""
+    d = (np.asarray(test, float) - np.asarray(reference, float))[mask]
+    r = np.asarray(reference, float)[mask]
+    denom = float(np.sqrt(np.mean(r * r))) if r.size else 0.0
+    return float(np.sqrt(np.mean(d * d))) / denom if denom > 0 else float("nan")
+
+
+def flip_mean(test_srgb8: np.ndarray, reference_srgb8: np.ndarray, mask: np.ndarray):
+    """(mean FLIP over the mask, FLIP value map (H, W), magma map (H, W, 3) uint8)."""
+    import flip_evaluator
+
+    ref = np.ascontiguousarray(reference_srgb8, np.float32) / 255.0
+    tst = np.ascontiguousarray(test_srgb8, np.float32) / 255.0
+    value, _, _ = flip_evaluator.evaluate(ref, tst, "LDR", applyMagma=False, parameters={"ppd": FLIP_PPD})
+    value = np.asarray(value, float).reshape(ref.shape[:2])
+    magma, _, _ = flip_evaluator.evaluate(ref, tst, "LDR", applyMagma=True, computeMeanError=False,
+                                          parameters={"ppd": FLIP_PPD})
+    magma8 = (np.clip(np.asarray(magma, float), 0, 1) * 255 + 0.5).astype(np.uint8)
+    mean = float(value[mask].mean()) if mask.any() else float(value.mean())
+    return mean, value, magma8
+
+
+def compare_images(reference: np.ndarray, test: np.ndarray, mask: np.ndarray, exposure: float) -> dict:
+    """FLIP (displayed images) and relative RMSE (linear) of ``test`` against ``reference``."""
+    ref8 = _scenes.to_srgb8(reference, exposure)
+    tst8 = _scenes.to_srgb8(test, exposure)
+    flip, _, magma = flip_mean(tst8, ref8, mask)
+    return {"flip": flip, "rel_rmse": relative_rmse(test, reference, mask), "_magma": magma,
+            "_ref8": ref8, "_test8": tst8}
+
+
+def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere", opts=None,
+                   output=None, params=None, noise_floor: bool = True) -> dict:
+    """Render ``scene`` with the reference and with its fitted model; compare.
+
+    Parameters
+    ----------
+    reference : str
+        A name of :data:`kesbrdf.render.reference_bsdf.REFERENCE_NAMES`.
+    protocol : {"paper", "dense"}
+    scene : str
+        A scene of :data:`kesbrdf.render.scenes.SCENES` without a drape folder.
+    opts : RenderOptions, optional
+        Default :func:`default_options`: 160x120, 64 spp, the area light alone in a dark
+        room (``env="none"``): one small source shows the lobe's shape, where a broad
+        environment averages it away (and doubles the noise floor at equal spp).
+    output : path, optional
+        PNG panel to write; the numbers go next to it as ``<stem>.json``.
+    noise_floor : bool
+        Also render the reference with another seed (module docstring, step 3).
+
+    Returns
+    -------
+    dict
+        ``flip``, ``rel_rmse`` (model vs reference), ``noise_flip``, ``noise_rel_rmse``,
+        ``exposure`` (stops), ``cloth_pixels``, the reference, protocol, scene, options,
+        and the model's kind and sample count; plus the panel and JSON paths.
+    """
+    if protocol not in PROTOCOLS:
+        raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
+    opts = (opts or default_options()).validate()
+    ref = make_reference(reference, params)
+    model, n_samples = fit_reference_model(ref, protocol)
+    kind = getattr(model, "kind", "kes")
+    with tempfile.TemporaryDirectory(prefix="kesbrdf-compare-") as tmp:
+        model_path = Path(tmp) / ("model.kes.json" if kind == "kes" else "model.halfdiff.kes.json")
+        model.save(model_path)
+        ref_bsdf = reference_bsdf_dict(reference, two_sided=opts.two_sided, params=params, sampling=opts.sampling)
+        ref_scene = _scenes.load_scene(None, scene, opts, cloth_bsdf=ref_bsdf)
+        mask = cloth_mask(ref_scene)
+        img_ref = _scenes.render_scene(ref_scene, opts)
+        # the model and the second reference use the same other seed: the two
+        # comparisons then differ only in the cloth's BSDF, not in the noise
+        o2 = replace(opts, seed=int(opts.seed) + 1)
+        mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, kind, o2))
+        img_mod = _scenes.render_scene(mod_scene, o2)
+        img_ref2 = None
+        if noise_floor:
+            img_ref2 = _scenes.render_scene(_scenes.load_scene(None, scene, o2, cloth_bsdf=ref_bsdf), o2)
+    exposure = auto_exposure(img_ref, mask) + float(opts.exposure)
+    res = compare_images(img_ref, img_mod, mask, exposure)
+    out = {
+        "reference": reference,
+        "protocol": protocol,
+        "scene": scene,
+        "model_kind": kind,
+        "samples": n_samples,
+        "flip": res["flip"],
+        "rel_rmse": res["rel_rmse"],
+        "exposure": exposure,
+        "cloth_pixels": int(mask.sum()),
+        "options": opts.to_json(),
+        "reference_params": getattr(ref, "params", lambda: {})(),
+    }
+    if img_ref2 is not None:
+        noise = compare_images(img_ref, img_ref2, mask, exposure)
+        out["noise_flip"] = noise["flip"]
+        out["noise_rel_rmse"] = noise["rel_rmse"]
+    out["_images"] = {"reference": img_ref, "model": img_mod, "mask": mask}
+    if output is not None:
+        output = Path(output)
+        write_panel(output, res["_ref8"], res["_test8"], res["_magma"], out)
+        meta = {k: v for k, v in out.items() if not k.startswith("_")}
+        json_path = output.with_suffix(".json")
+        write_text(json_path, json.dumps(meta, indent=1, default=str) + "\n")
+        out["panel"] = str(output)
+        out["json"] = str(json_path)
+    return out
+
+
+def write_panel(path, ref8: np.ndarray, model8: np.ndarray, flip8: np.ndarray, numbers: dict) -> Path:
+    """Write reference | model | FLIP map side by side, labelled, as a PNG (atomically)."""
+    from PIL import Image, ImageDraw
+    from PIL.PngImagePlugin import PngInfo
+
+    path = Path(path)
+    if path.suffix.lower() != ".png":
+        raise KesbrdfError(f"compare: expected a panel file ending .png, got {path.name!r}")
+    h, w = ref8.shape[:2]
+    band = 14
+    panel = Image.new("RGB", (3 * w, h + 2 * band), (16, 16, 16))
+    for k, img in enumerate((ref8, model8, flip8)):
+        panel.paste(Image.fromarray(np.ascontiguousarray(img[..., :3])), (k * w, band))
+    draw = ImageDraw.Draw(panel)
+    kind = "KES" if numbers.get("protocol") == "paper" else "KES half/diff"
+    titles = (f"reference: {numbers.get('reference')}", f"{kind} model ({numbers.get('protocol')})", "FLIP error")
+    for k, t in enumerate(titles):
+        draw.text((k * w + 3, 1), t, fill=(230, 230, 230))
+    text = f"FLIP {numbers['flip']:.3f}  relRMSE {numbers['rel_rmse']:.3f}"
+    if "noise_flip" in numbers:
+        text += f"   noise floor: FLIP {numbers['noise_flip']:.3f}  relRMSE {numbers['noise_rel_rmse']:.3f}"
+    draw.text((3, h + band + 1), text, fill=(230, 230, 230))
+    info = PngInfo()
+    info.add_text("kesbrdf", json.dumps({k: v for k, v in numbers.items() if not k.startswith("_")}, default=str))
+    with atomic_path(path) as tmp:
+        panel.save(tmp, format="PNG", pnginfo=info)
+    return path

@@ -1,0 +1,200 @@
+r"""The ``kesbrdf_halfdiff`` BSDF: a ``kes-halfdiff`` model file as a Mitsuba 3 plugin.
+
+Evaluation is :func:`kesbrdf.halfdiff.evaluate_halfdiff` in Dr.Jit (single precision):
+
+.. math::
+
+    f_r(\omega_i, \omega_r) = c + \frac{T(\phi_h, \theta_h, \theta_d)}{\sqrt{\cos\theta_i\cos\theta_r}}
+
+(no square root for models with ``normalisation="none"``), with h = ω_i + ω_r, φ_h its
+azimuth (the plane of incidence ω_r − ω_i where h ∥ z), θ_h = angle(h, z),
+θ_d = half the angle between ω_i and ω_r, and T read by trilinear lookup (φ periodic
+through a repeated first φ slice, θ_h and θ_d clamped to their grids), from a
+``mi.Texture3f``.
+
+Frames and colour as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp;
+``si.wi`` is the viewer ω_r, ``wo`` the light ω_i; ``base_color`` replaces the body by
+base_color/π, ``lobe_tint`` multiplies T.
+
+``extrapolation``: ``hold`` (default, as :func:`~kesbrdf.halfdiff.evaluate_halfdiff`)
+keeps the table at the last measured θ_h; ``fade`` scales the lobe by
+max(0, 1 − (θ_h − θ_h,max)/(Δ/2)), Δ = :data:`kesbrdf.render.bsdf.FADE_DEG` (the same
+fade as the ``kesbrdf`` plugin's, in γ = 2θ_h).
+
+Sampling: the mixture of :mod:`kesbrdf.render.sampling` with the ``halfvector``
+lobe, whose (φ_h, γ = 2θ_h) density is the table averaged over θ_d.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from kesbrdf.errors import ModelError, where
+from kesbrdf.render import sampling as _sampling
+from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, parse_rgb
+
+__all__ = ["HalfDiffBSDF", "register", "check_halfdiff_model"]
+
+
+def _prop(props, name, default=None):
+    return props[name] if name in props else default
+
+
+def check_halfdiff_model(path):
+    """Load a model file and check that it is a ``kes-halfdiff`` model with 1 or 3 channels."""
+    from kesbrdf.model import load
+
+    model = load(Path(path))
+    if getattr(model, "kind", "kes") != "kes-halfdiff":
+        raise ModelError(f"{where(path)}the kesbrdf_halfdiff BSDF reads models of kind 'kes-halfdiff', got {model.kind!r}")
+    if model.table.shape[-1] not in (1, 3):
+        raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.table.shape[-1]}")
+    return model
+
+
+class HalfDiffBSDF(mi.BSDF):
+    """Mitsuba BSDF of a ``kes-halfdiff`` model (module docstring)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        filename = _prop(props, "filename")
+        if filename is None:
+            raise ModelError("kesbrdf_halfdiff BSDF: expected a 'filename' parameter (a model file), got none")
+        model = check_halfdiff_model(str(filename))
+        self.filename = str(filename)
+        table = model.table if model.table.shape[-1] == 3 else np.repeat(model.table, 3, axis=-1)
+        body = model.body if model.body.size == 3 else np.repeat(model.body, 3)
+        tint = parse_rgb(_prop(props, "lobe_tint", "1,1,1"), "lobe_tint")
+        base = _prop(props, "base_color")
+        if base is not None:
+            albedo = parse_rgb(base, "base_color")
+            if np.any(albedo > 1):
+                raise ModelError(f"base_color: expected a body albedo with R,G,B in [0, 1], got {base!r}")
+            body = albedo / math.pi
+        table = np.clip(np.nan_to_num(table * tint), 0.0, None)
+        self.sqrtcos = model.parameters.get("normalisation", "sqrtcos") == "sqrtcos"
+        self.two_sided = bool(_prop(props, "two_sided", False))
+        self.extrapolation = str(_prop(props, "extrapolation", "hold"))
+        if self.extrapolation not in EXTRAPOLATIONS:
+            raise ModelError(
+                f"kesbrdf_halfdiff BSDF: unknown extrapolation {self.extrapolation!r}; "
+                f"expected one of {', '.join(EXTRAPOLATIONS)}"
+            )
+        n_phi, n_h, n_d = table.shape[:3]
+        self.n_phi, self.n_h, self.n_d = n_phi, n_h, n_d
+        self.h_max = float(model.theta_h_grid[-1])
+        self.d_max = float(model.theta_d_grid[-1])
+        self.dh = float(model.theta_h_grid[1] - model.theta_h_grid[0])
+        self.dd = float(model.theta_d_grid[1] - model.theta_d_grid[0])
+        padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
+        self.texture = mi.Texture3f(
+            mi.TensorXf(padded), use_accel=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp
+        )
+        self.body = mi.Color3f(*[float(b) for b in body])
+
+        sampling = str(_prop(props, "sampling", "lobe"))
+        q_mean = table.mean(axis=(2, 3))  # (φ_h, θ_h)
+        gamma_grid = 2.0 * np.asarray(model.theta_h_grid, float)
+        if sampling == "cosine":
+            weight = 0.0
+        else:
+            lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, gamma_grid)
+            diffuse = math.pi * float(np.mean(body))
+            weight = _sampling.lobe_weight(lobe, diffuse)
+        self.sampling = sampling
+        self.sampler = _sampling.LobeSampler(
+            _sampling.lobe_density_table(q_mean, gamma_grid, "halfvector"), float(gamma_grid[-1]), "halfvector", weight
+        )
+        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
+        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        if self.two_sided:
+            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
+            flags_body = flags_body | mi.BSDFFlags.BackSide
+        self.m_components = [flags_lobe, flags_body]
+        self.m_flags = flags_lobe | flags_body
+
+    def f_r(self, wi, wr, active=True):
+        """f_r (1/sr) for light ω_i and viewer ω_r in the fabric frame."""
+        above = (wi.z > 0.0) & (wr.z > 0.0) & active
+        h = wi + wr
+        plane = wr - wi
+        hxy = dr.norm(mi.Vector2f(h.x, h.y))
+        small = hxy < AZIMUTH_EPS
+        phi = dr.atan2(dr.select(small, plane.y, h.y), dr.select(small, plane.x, h.x))
+        phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
+        theta_h = dr.atan2(hxy, h.z)
+        theta_d = 0.5 * dr.atan2(dr.norm(dr.cross(wi, wr)), dr.dot(wi, wr))
+        u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
+        v = dr.clip(dr.clip(theta_h, 0.0, self.h_max) * (1.0 / self.dh), 0.0, float(self.n_h - 1))
+        w = dr.clip(dr.clip(theta_d, 0.0, self.d_max) * (1.0 / self.dd), 0.0, float(self.n_d - 1))
+        pos = mi.Point3f((w + 0.5) / self.n_d, (v + 0.5) / self.n_h, (u + 0.5) / (self.n_phi + 1))
+        r, g, b = self.texture.eval(pos)
+        q = mi.Color3f(r, g, b)
+        if self.extrapolation == "fade":
+            q = q * dr.clip(1.0 - (theta_h - self.h_max) * (2.0 / math.radians(FADE_DEG)), 0.0, 1.0)
+        if self.sqrtcos:
+            q = q * dr.rsqrt(dr.maximum(wi.z * wr.z, 1e-20))
+        return dr.select(above, self.body + q, 0.0)
+
+    def _orient(self, si, wo):
+        wr = mi.Vector3f(si.wi)
+        wi = mi.Vector3f(wo)
+        if self.two_sided:
+            back = wr.z < 0.0
+            wr.z = dr.select(back, -wr.z, wr.z)
+            wi.z = dr.select(back, -wi.z, wi.z)
+        return wr, wi
+
+    def eval(self, ctx, si, wo, active=True):
+        wr, wi = self._orient(si, wo)
+        return dr.select(active, self.f_r(wi, wr, active) * dr.maximum(wi.z, 0.0), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        wr, wi = self._orient(si, wo)
+        ok = active & (wr.z > 0.0) & (wi.z > 0.0)
+        return dr.select(ok, self.sampler.pdf(wr, wi), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        wr = mi.Vector3f(si.wi)
+        back = wr.z < 0.0
+        if self.two_sided:
+            wr.z = dr.select(back, -wr.z, wr.z)
+        wi, pdf, from_lobe = self.sampler.sample(wr, sample1, sample2)
+        ok = active & (wr.z > 0.0) & (wi.z > 0.0) & (pdf > 0.0)
+        f = self.f_r(wi, wr, ok) * wi.z
+        weight = dr.select(ok, f / dr.maximum(pdf, 1e-30), 0.0)
+        wo = mi.Vector3f(wi)
+        if self.two_sided:
+            wo.z = dr.select(back, -wo.z, wo.z)
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = wo
+        bs.pdf = dr.select(ok, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = dr.select(
+            from_lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        )
+        bs.sampled_component = dr.select(from_lobe, mi.UInt32(0), mi.UInt32(1))
+        return bs, weight
+
+    def traverse(self, callback):
+        pass
+
+    def parameters_changed(self, keys):
+        pass
+
+    def to_string(self):
+        return f"HalfDiffBSDF[filename={self.filename!r}, two_sided={self.two_sided}, sampling={self.sampling!r}]"
+
+
+def register() -> None:
+    """Register the plugin under the name ``kesbrdf_halfdiff`` (idempotent)."""
+    mi.register_bsdf("kesbrdf_halfdiff", lambda props: HalfDiffBSDF(props))

@@ -1,0 +1,174 @@
+"""Reference vs model renders: metrics, panel, and what the comparison can tell apart."""
+
+import json
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.render
+
+#: Tiny renders keep the test fast; the differences asserted below are several times
+#: the Monte-Carlo noise at this size (noise floor measured: rel RMSE ~0.1 at 32 spp).
+RES = (64, 48)
+SPP = 32
+
+
+def _opts():
+    from kesbrdf.render.scenes import RenderOptions
+
+    return RenderOptions(spp=SPP, resolution=RES)
+
+
+def test_metrics_on_known_images():
+    from kesbrdf.render.compare import compare_images, relative_rmse
+
+    rng = np.random.default_rng(3)
+    ref = rng.uniform(0.1, 0.5, (12, 16, 3))
+    mask = np.ones((12, 16), bool)
+    same = compare_images(ref, ref.copy(), mask, 0.0)
+    assert same["flip"] == 0.0 and same["rel_rmse"] == 0.0
+    # a uniform 10 % gain is a relative RMSE of exactly 0.1
+    assert relative_rmse(1.1 * ref, ref, mask) == pytest.approx(0.1, rel=1e-12)
+    # masked-out pixels do not count
+    bad = ref.copy()
+    bad[0] = 9.0
+    mask[0] = False
+    assert relative_rmse(bad, ref, mask) == 0.0
+
+
+def test_compare_render_writes_panel_and_numbers(render_module, tmp_path):
+    from PIL import Image
+
+    from kesbrdf.render.compare import compare_render
+
+    out = tmp_path / "cmp.png"
+    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=out)
+    panel = Image.open(out)
+    assert panel.size[0] == 3 * RES[0] and panel.size[1] > RES[1]
+    meta = json.loads((tmp_path / "cmp.json").read_text())
+    for key in ("flip", "rel_rmse", "noise_flip", "noise_rel_rmse", "exposure"):
+        assert np.isfinite(meta[key]), key
+    assert meta["samples"] == 116 and meta["model_kind"] == "kes"
+    assert 0 < meta["cloth_pixels"] < RES[0] * RES[1]
+    assert 0.0 <= r["flip"] <= 1.0
+
+
+def test_dense_protocol_model_is_closer_than_paper_on_ward(render_module):
+    """More of the hemisphere measured (900 in-plane pairs vs 116) renders closer to Ward.
+
+    Measured at 160x120/64 spp: relative RMSE 0.18 (paper) vs 0.03 (dense, below the
+    noise floor of 0.08); the margin asserted here is far inside that gap.
+    """
+    from kesbrdf.render.compare import compare_render
+
+    paper = compare_render("satin-ward", "paper", "sphere", _opts(), noise_floor=False)
+    dense = compare_render("satin-ward", "dense", "sphere", _opts(), noise_floor=False)
+    assert dense["model_kind"] == "kes-halfdiff"
+    assert dense["rel_rmse"] < 0.8 * paper["rel_rmse"], (dense["rel_rmse"], paper["rel_rmse"])
+
+
+def test_halfdiff_plugin_agrees_with_numpy(render_module, rng, tmp_path):
+    import drjit as dr
+    import mitsuba as mi
+
+    from kesbrdf.gonio import measure
+    from kesbrdf.halfdiff import evaluate_halfdiff, fit_halfdiff
+    from kesbrdf.references.ward import AnisotropicWard
+
+    model = fit_halfdiff(measure(AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1), protocol="dense"))
+    path = tmp_path / "m.kes.json"
+    model.save(path)
+    n = 3000
+    from kesbrdf.geometry import spherical_to_cartesian
+
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wi, wr = wi.astype(np.float32).astype(float), wr.astype(np.float32).astype(float)
+    bsdf = mi.load_dict({"type": "kesbrdf_halfdiff", "filename": str(path)})
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(*wr.T)
+    got = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T
+    want = evaluate_halfdiff(model, wi, wr) * wi[:, 2:3]
+    # float32 angles and texture coordinates (as the kes plugin's EVAL_RTOL)
+    np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-7)
+
+
+@pytest.mark.parametrize("theta", [0.3, 1.1])
+def test_chi2_halfdiff_sampling(render_module, tmp_path, monkeypatch, theta):
+    import math
+
+    import mitsuba as mi
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
+
+    from kesbrdf.gonio import measure
+    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.references.ward import AnisotropicWard
+
+    monkeypatch.chdir(tmp_path)
+    path = tmp_path / "m.kes.json"
+    fit_halfdiff(measure(AnisotropicWard(0.1, 0.3, rho_d=0.1, rho_s=0.2), protocol="dense")).save(path)
+    wi = mi.ScalarVector3f(math.sin(theta) * math.cos(0.7), math.sin(theta) * math.sin(0.7), math.cos(theta))
+    sample, pdf = BSDFAdapter("kesbrdf_halfdiff", {"type": "kesbrdf_halfdiff", "filename": str(path)}, wi=wi)
+    test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3,
+                         sample_count=200_000, res=64, ires=16, seed=2)
+    assert test.run(), test.messages
+
+
+def test_report_embeds_the_panels(render_module, tmp_path):
+    from kesbrdf.plotting.report import build_report
+    from kesbrdf.render.compare import compare_render
+
+    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=tmp_path / "p.png", noise_floor=False)
+    text = build_report(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}])
+    assert "Reference vs model renders" in text
+    assert text.count('<figure class="compare">') == 1  # the missing panel is skipped
+    assert f"FLIP {r['flip']:.3f}" in text
+    assert "Reference vs model renders" not in build_report(figures=())
+
+
+def test_demo_comparisons_step(render_module, tmp_path, monkeypatch):
+    from kesbrdf.cli.demo import _comparisons
+    from kesbrdf.references.ward import AnisotropicWard
+    from kesbrdf.render import compare
+
+    tiny = compare.default_options
+    monkeypatch.setattr(compare, "default_options", lambda **kw: tiny(**{**kw, "spp": 8, "resolution": (48, 36)}))
+
+    said = []
+    out = _comparisons(tmp_path, AnisotropicWard(0.08, 0.22), said.append)
+    assert [c["protocol"] for c in out] == ["paper", "dense"]
+    assert all((tmp_path / "compare" / f"satin-ward_{p}.png").is_file() for p in ("paper", "dense"))
+    assert len(said) == 2
+
+
+def test_halfdiff_fade_changes_only_beyond_the_measured_half_angles(render_module, rng, tmp_path):
+    import drjit as dr
+    import mitsuba as mi
+
+    from kesbrdf.geometry import spherical_to_cartesian
+    from kesbrdf.gonio import measure
+    from kesbrdf.halfdiff import fit_halfdiff, to_half_diff
+    from kesbrdf.references.ward import AnisotropicWard
+
+    model = fit_halfdiff(measure(AnisotropicWard(0.2, 0.4, rho_d=0.1, rho_s=0.3), protocol="dense"))
+    path = tmp_path / "m.kes.json"
+    model.save(path)
+    n = 3000
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(0.05, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wi, wr = wi.astype(np.float32).astype(float), wr.astype(np.float32).astype(float)
+    out = {}
+    for ex in ("hold", "fade"):
+        bsdf = mi.load_dict({"type": "kesbrdf_halfdiff", "filename": str(path), "extrapolation": ex})
+        si = dr.zeros(mi.SurfaceInteraction3f, n)
+        si.wi = mi.Vector3f(*wr.T)
+        out[ex] = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T / wi[:, 2:3]
+    _, theta_h, _ = to_half_diff(wi, wr)
+    h_max = model.theta_h_grid[-1]
+    inside = theta_h < h_max - 1e-4
+    beyond = theta_h > h_max + np.radians(3.0) + 1e-4
+    assert inside.sum() > 100 and beyond.sum() > 100
+    np.testing.assert_array_equal(out["fade"][inside], out["hold"][inside])
+    np.testing.assert_allclose(out["fade"][beyond], np.broadcast_to(model.body, out["fade"][beyond].shape), rtol=1e-5)
+    with pytest.raises(Exception, match="extrapolation"):
+        mi.load_dict({"type": "kesbrdf_halfdiff", "filename": str(path), "extrapolation": "mirror"})
