@@ -129,7 +129,7 @@ def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions
         if not skipped:
             sc = _scenes.load_scene(model_path, scene, opts, drape=drape, frame=i, framing=framing)
             img = _scenes.render_scene(sc, opts)
-            _scenes.save_image(path, img, {**meta, "frame": i}, opts.exposure)
+            _scenes.save_image(path, img, {**meta, "frame": i}, opts.exposure, opts.tonemap)
         paths.append(path)
         if progress is not None:
             progress(i + 1, total, skipped)
