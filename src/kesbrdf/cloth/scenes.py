@@ -250,7 +250,7 @@ def garment_scene(resolution: int, density: float, stretch: float, shear: float)
     """
     from kesbrdf.cloth import pattern as _pattern
 
-    cloth = _pattern.gored_skirt(max(resolution // 2, 4), max(resolution // 6, 3), density, stretch, shear)
+    cloth = _pattern.gored_skirt(max(resolution // 2, 4), max(resolution // 4, 3), density, stretch, shear)
     body = Collider("mesh", (0.0, 0.0, 0.0), label="mannequin", moves=True)
     return SceneSpec("garment", cloth, [body, *MANNEQUIN_STAND])
 
