@@ -23,8 +23,10 @@ The garment is cut as a tailor would cut it (docs/drape.md, "Pattern panels"):
   (the body's cross-section at that height, grown until its perimeter is C(y) plus one
   seam gap per seam), gore k centred on the arc at k/gores of the way round from the
   centre front; the heights follow the meridian so that the placed panel is nearly
-  isometric to the pattern.  Vertically the panel hangs straight, horizontally it is
-  bent round the body; the solver lets it fall into folds.
+  isometric to the pattern.  Below the hip line only ``hang_flare`` of the flare goes
+  into the mean girth: the rest is laid in flutes (the curve pushed along its normal by
+  a cos(gores·θ) wave whose amplitude makes its length the full circumference), one per
+  gore, as a flared skirt hangs; the solver lets it settle into its folds.
 * **Seams.** The right edge of gore k is sewn to the left edge of gore k+1, vertex to
   vertex (the rows match): a stiff zero-slack spring of rest length :data:`SEAM_GAP`
   per pair.  The seam vertices get a contact radius of SEAM_GAP / 2, so the cloth
@@ -60,6 +62,8 @@ class SkirtPattern:
     hip_depth : waist to the hip line (fullest part of the body) along the grain.
     hip_ease : extra circumference at the hip line over the body's.
     hem_circumference : circumference of the hem (flare).
+    hang_flare : fraction of the flare (girth beyond the hip's) kept in the mean girth of
+        the placed skirt; the rest is laid in flutes, one per gore.
     """
 
     gores: int = 6
@@ -67,6 +71,7 @@ class SkirtPattern:
     hip_depth: float = 0.22
     hip_ease: float = 0.06
     hem_circumference: float = 2.2
+    hang_flare: float = 0.45
 
 
 def _body_ellipse(z, grow=0.0):
@@ -116,22 +121,46 @@ def _grow_to_perimeter(a, b, target, iters: int = 48):
     return 0.5 * (lo + hi)
 
 
-def _arc_points(a, b, c, s_query, samples: int = 4096):
-    """Points at arc lengths ``s_query`` (rows, k) along ellipses (rows,), from the front.
+def _curve(a, b, c, amp, waves, t):
+    """Points (rows, samples, 2) of fluted ellipses: the ellipse pushed along its normal by
+    amp·cos(waves·(t + π/2)) (crests at the centre front and every 2π/waves)."""
+    ct, st = np.cos(t)[None, :], np.sin(t)[None, :]
+    px, py = a[:, None] * ct, c[:, None] + b[:, None] * st
+    nx, ny = b[:, None] * ct, a[:, None] * st  # outward normal of the ellipse (unnormalised)
+    norm = np.hypot(nx, ny)
+    w = amp[:, None] * np.cos(waves * (t[None, :] + np.pi / 2))
+    return np.stack([px + w * nx / norm, py + w * ny / norm], -1)
+
+
+def _length(pts):
+    return np.concatenate([np.zeros(pts.shape[:1] + (1,)),
+                           np.cumsum(np.linalg.norm(np.diff(pts, axis=1), axis=-1), axis=1)], axis=1)
+
+
+def _flute_amplitude(a, b, c, target, waves, t, iters: int = 40):
+    """Amplitude with perimeter(fluted ellipse) = target (0 where the ellipse is long enough)."""
+    lo, hi = np.zeros_like(a), np.maximum(a, b)
+    for _ in range(iters):
+        mid = 0.5 * (lo + hi)
+        long_ = _length(_curve(a, b, c, mid, waves, t))[:, -1] > target
+        hi, lo = np.where(long_, mid, hi), np.where(long_, lo, mid)
+    return np.where(target > _length(_curve(a, b, c, 0 * a, waves, t))[:, -1] + 1e-6, 0.5 * (lo + hi), 0.0)
+
+
+def _arc_points(a, b, c, s_query, amp=None, waves: int = 6, samples: int = 4096):
+    """Points at arc lengths ``s_query`` (rows, k) along the (fluted) row curves, from the front.
 
     Arc length runs counter-clockwise (seen from above) from the centre front, the
     point (0, c − b) at parameter angle −π/2.
     """
     t = -np.pi / 2 + np.linspace(0.0, 2 * np.pi, samples + 1)
-    px = a[:, None] * np.cos(t)[None, :]
-    py = c[:, None] + b[:, None] * np.sin(t)[None, :]
-    seg = np.hypot(np.diff(px, axis=1), np.diff(py, axis=1))
-    cum = np.concatenate([np.zeros((len(a), 1)), np.cumsum(seg, axis=1)], axis=1)
+    pts = _curve(a, b, c, np.zeros_like(a) if amp is None else amp, waves, t)
+    cum = _length(pts)
     out = np.empty(s_query.shape + (2,))
     for r in range(len(a)):  # one interpolation per row (rows ≈ 30), vectorised along it
         sq = np.mod(s_query[r], cum[r, -1])
-        out[r, :, 0] = np.interp(sq, cum[r], px[r])
-        out[r, :, 1] = np.interp(sq, cum[r], py[r])
+        out[r, :, 0] = np.interp(sq, cum[r], pts[r, :, 0])
+        out[r, :, 1] = np.interp(sq, cum[r], pts[r, :, 1])
     return out
 
 
@@ -154,22 +183,29 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
     uv = np.stack([y, x + float(np.max(np.abs(x)))], -1)  # u down the grain line, v across
     gore = _scenes._grid(flat, uv, False, density, stretch, shear)
 
-    # placement: rows on ellipses around the body, nearly isometric down the meridian
+    # placement: rows on ellipses around the body, nearly isometric down the meridian;
+    # below the hip line the flare is laid in flutes (one per gore, crest at its centre)
+    # round an ellipse of the "hanging" girth, as a flared skirt falls
     yr = y[:, 0]
     circ = circumference(pattern, yr)
     perim = circ + n * SEAM_GAP
-    radius = perim / (2 * np.pi)
+    h = pattern.hip_depth
+    c_hip = float(circumference(pattern, h)) + n * SEAM_GAP
+    hang = np.minimum(perim, c_hip + pattern.hang_flare * (perim - c_hip))
+    radius = hang / (2 * np.pi)
     dz = np.sqrt(np.maximum(np.diff(yr) ** 2 - np.diff(radius) ** 2, 1e-12))
     z = _mannequin.WAIST_Z - np.concatenate([[0.0], np.cumsum(dz)])
     a0, b0, c0 = _body_ellipse(z)
-    grow = _grow_to_perimeter(a0, b0, perim)
+    grow = _grow_to_perimeter(a0, b0, hang)
     A, B = a0 + grow, b0 + grow
+    t = -np.pi / 2 + np.linspace(0.0, 2 * np.pi, 4097)
+    amp = _flute_amplitude(A, B, c0, perim, n, t)
 
     n_per = n_i * n_j
     positions, faces, springs, ke, rest = [], [], [], [], []
     for k in range(n):
         s_query = k * perim[:, None] / n + x  # pattern x -> arc length on the row's ellipse
-        xy = _arc_points(A, B, c0, s_query)
+        xy = _arc_points(A, B, c0, s_query, amp, n)
         positions.append(np.concatenate([xy, np.broadcast_to(z[:, None, None], (n_i, n_j, 1))], -1).reshape(-1, 3))
         faces.append(gore.faces + k * n_per)
         springs.append(gore.springs + k * n_per)

@@ -60,6 +60,8 @@ __all__ = [
 SCENES = ("sphere", "swatch", "drape", "dressform", "garment")
 ENVIRONMENTS = ("studio", "sky", "uniform", "none", "studio-hdr", "sunsky")
 LIGHTS = ("area", "sun", "none", "studio")
+#: Floor under the studio soft boxes: dark grey, so the fabric, not the floor, carries the shot.
+STUDIO_FLOOR_ALBEDO = (0.14, 0.14, 0.145)
 #: Diffuse albedo of the mannequin (a warm ivory jersey cover).
 MANNEQUIN_ALBEDO = (0.62, 0.58, 0.52)
 #: Diffuse albedo of floors and dress forms.
@@ -411,7 +413,7 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
                 "to_world": T().translate([float(center[0]), floor_y - 1e-3, float(center[2])])
                 @ T().rotate([1, 0, 0], -90)
                 @ T().scale(max(8 * radius, 12.0)),
-                "bsdf": _diffuse(),
+                "bsdf": _diffuse(STUDIO_FLOOR_ALBEDO if opts.light == "studio" else PROP_ALBEDO),
             }
         if scene == "garment":
             view_dir = (0.12, 0.12, 1.0)  # a fashion shot: nearly level, slightly from the right
