@@ -84,7 +84,7 @@ def add_arguments(p):
     p.add_argument("--animation", metavar="DRAPE_DIR", default=None,
                    help="render every frame of a 'kesbrdf drape' folder to a video (resumable)")
     p.add_argument("--drape", metavar="DRAPE_DIR", default=None,
-                   help="for --scene drape/dressform: render this drape folder's frame (default: a procedural garment)")
+                   help="for --scene drape/dressform/garment: render this drape folder's frame (default: a procedural garment)")
     p.add_argument("--frame", type=int, default=None, help="frame of --drape to render (default: the last)")
     p.add_argument("--fps", type=float, default=None, help="animation frame rate (default: drape.json's)")
     p.add_argument("--first-frame", type=int, default=0, help="animation: start at this drape frame (default 0)")

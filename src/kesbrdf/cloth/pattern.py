@@ -38,7 +38,6 @@ All lengths in metres, world z up, the body's front towards −y.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
