@@ -128,8 +128,8 @@ class DrapeParameters:
     turn_start_s: float = 0.8
     turn_duration_s: float = 1.2
     contact_interval: int = 4
-    bending_interval: int = 2
-    self_contact_interval: int = 3
+    bending_interval: int = 3
+    self_contact_interval: int = 4
 
     def validate(self) -> "DrapeParameters":
         if self.scene not in SCENES:
