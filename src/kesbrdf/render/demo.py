@@ -33,9 +33,15 @@ CLIP_RENDER_SIZE = (640, 360)
 CLIP_FIRST_FRAME = 17
 
 
+def _can_denoise() -> bool:
+    import importlib.util
+
+    return importlib.util.find_spec("pyoidn") is not None
+
+
 def _studio(spp: int, resolution=(1280, 720), **kw):
     return _scenes.RenderOptions(spp=spp, resolution=resolution, base_color=DEMO_COLOUR, env="studio-hdr",
-                                 light="studio", tonemap="aces", denoise=True, **kw)
+                                 light="studio", tonemap="aces", denoise=_can_denoise(), **kw)
 
 
 def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=None,
@@ -90,7 +96,8 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
         say(f"render: animation of {len(drape.frames)} frames")
         written["animation"] = _animation.render_animation(model_path, drape.root, out / "drape.mp4", anim,
                                                            progress=frames)
-    sheet = _scenes.RenderOptions(spp=16, resolution=(200, 240), env="studio-hdr", light="studio", denoise=True)
+    sheet = _scenes.RenderOptions(spp=16, resolution=(200, 240), env="studio-hdr", light="studio",
+                                  denoise=_can_denoise())
     say("render: colourways")
     written["colourways"] = _colourways.render_colourways(
         model_path, out / "colourways.png", sheet, scene=garment_scene, drape=garment
