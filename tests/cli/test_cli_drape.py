@@ -12,6 +12,8 @@ from kesbrdf.cli.main import main
     (["--resolution", "2"], "resolution"),
     (["--frames", "0"], "frames"),
     (["--density-gsm", "5000"], "density"),
+    (["--turn-deg", "30"], "--scene garment"),
+    (["--scene", "garment", "--turn-deg", "30", "--turn-duration", "0"], "turn_duration_s"),
 ])
 def test_bad_values_exit_2_with_one_line(tmp_path, capsys, argv, match):
     assert main(["drape", "-o", str(tmp_path / "d"), *argv]) == 2

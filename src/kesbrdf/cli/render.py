@@ -9,7 +9,7 @@ from kesbrdf.errors import KesbrdfError
 
 HELP = "Render a model (sphere, swatch, draped cloth or dress form) with Mitsuba 3; --animation renders a drape sequence."
 
-SCENES = ("sphere", "swatch", "drape", "dressform")
+SCENES = ("sphere", "swatch", "drape", "dressform", "garment")
 
 
 def parse_resolution(text: str) -> tuple[int, int]:
@@ -41,9 +41,15 @@ def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
     """Flags shared by ``render`` and ``colourways``."""
     p.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
     p.add_argument("--resolution", default=resolution, help=f"image size WxH (default {resolution})")
-    p.add_argument("--light", choices=("area", "sun", "none"), default="area", help="key light (default area)")
-    p.add_argument("--env", choices=("studio", "sky", "uniform", "none"), default="studio",
-                   help="generated environment: studio (soft boxes), sky (gradient + sun), uniform (furnace), none")
+    p.add_argument("--light", choices=("area", "sun", "none", "studio"), default="area",
+                   help="key light (default area); studio: key, fill, rim and top soft boxes (docs/rendering.md)")
+    p.add_argument("--env", choices=("studio", "sky", "uniform", "none", "studio-hdr", "sunsky"), default="studio",
+                   help="generated environment: studio (soft boxes), sky (gradient + sun), uniform (furnace), none, "
+                        "studio-hdr (procedural HDR room), sunsky (Mitsuba's sky model)")
+    p.add_argument("--tonemap", choices=("clip", "aces"), default="clip",
+                   help="PNG/JPEG tone curve: clip (linear) or aces (filmic, docs/rendering.md)")
+    p.add_argument("--denoise", action="store_true",
+                   help="denoise with Intel Open Image Denoise using albedo and normal AOVs (pyoidn)")
     p.add_argument("--lobe-tint", default=None, metavar="R,G,B", help="tint of the measured lobe (default 1,1,1)")
     p.add_argument("--mapping", choices=("deviation", "halfvector"), default="deviation",
                    help="(phi, gamma) mapping (docs/formats.md); 'paper' is not renderable")
@@ -70,6 +76,8 @@ def render_options(args, **extra):
         seed=args.seed,
         exposure=args.exposure,
         extrapolation=args.extrapolation,
+        tonemap=args.tonemap,
+        denoise=args.denoise,
         **extra,
     ).validate()
 
@@ -81,9 +89,11 @@ def add_arguments(p):
     p.add_argument("--animation", metavar="DRAPE_DIR", default=None,
                    help="render every frame of a 'kesbrdf drape' folder to a video (resumable)")
     p.add_argument("--drape", metavar="DRAPE_DIR", default=None,
-                   help="for --scene drape/dressform: render this drape folder's frame (default: a procedural garment)")
+                   help="for --scene drape/dressform/garment: render this drape folder's frame (default: a procedural garment)")
     p.add_argument("--frame", type=int, default=None, help="frame of --drape to render (default: the last)")
     p.add_argument("--fps", type=float, default=None, help="animation frame rate (default: drape.json's)")
+    p.add_argument("--first-frame", type=int, default=0, help="animation: start at this drape frame (default 0)")
+    p.add_argument("--gif", default=None, metavar="GIF", help="animation: also write this GIF")
     p.add_argument("--base-color", default=None, metavar="R,G,B",
                    help="body colour: Lambertian albedo of the dyed fabric, each in [0,1] (default: measured body)")
     p.add_argument("--uv-rotation", type=float, default=0.0, metavar="DEG",
@@ -116,7 +126,7 @@ def run(args) -> int:
     if args.animation:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        scene = args.scene if args.scene in ("drape", "dressform") else None
+        scene = args.scene if args.scene in ("drape", "dressform", "garment") else None
         with Progress(TextColumn("rendering frames"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                       transient=True) as bar:
             task = bar.add_task("frames", total=None)
@@ -128,7 +138,8 @@ def run(args) -> int:
                     kept.append(done)
 
             out = animation.render_animation(args.model, args.animation, args.output, opts, scene=scene,
-                                             fps=args.fps, progress=progress)
+                                             fps=args.fps, progress=progress, first_frame=args.first_frame,
+                                             gif=args.gif)
         note = f" ({len(kept)} frame(s) kept from an earlier run)" if kept else ""
         stderr(f"wrote {out}{note}")
         return 0

@@ -42,6 +42,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -57,7 +58,7 @@ from kesbrdf.errors import KesbrdfError, where, validate_choice
 
 __all__ = ["DrapeError", "DrapeParameters", "SCENES", "simulate_drape", "frame_name", "load_checkpoint"]
 
-SCENES = ("sphere", "dressform")
+SCENES = ("sphere", "dressform", "garment")
 FORMAT = "kesbrdf-drape"
 VERSION = 1
 MANIFEST = "drape.json"
@@ -68,6 +69,8 @@ CHECKPOINT = "drape_state.npz"
 STABILITY_BETA = 1.5
 #: Most substeps a frame we accept; more means the fabric is too stiff for the grid.
 MAX_SUBSTEPS = 2000
+#: Cells per axis of the (periodic) particle hash grid used for cloth self-contact.
+HASH_GRID_DIM = 64
 
 
 class DrapeError(KesbrdfError):
@@ -93,6 +96,20 @@ class DrapeParameters:
     particle_radius_m : contact thickness, [0.0005, 0.02] m.
     self_contact : particle-particle contacts within 2 × particle_radius_m (cloth on
         cloth at the vertices); off halves the step time.
+    turn_deg : ``garment`` only: the mannequin turns about its vertical axis by this
+        angle [deg], [-720, 720], counter-clockwise seen from above, the waistband with it.
+    turn_start_s, turn_duration_s : when the turn starts and how long it takes [s]; the
+        angle follows (1 − cos πx)/2 of the elapsed fraction x (smooth start and stop).
+    contact_interval : substeps between refreshes of the cloth-collider contact list,
+        [1, 16].  Contacts are found within a 1 cm gap and re-projected every substep
+        against the tangent plane found, so a refresh is needed only before a particle
+        can travel 1 cm (at 2 m/s and 66 substeps a frame that is 10 substeps).
+    self_contact_interval : substeps between cloth self-contact solves, [1, 8].  A
+        particle moves well under a millimetre per substep against a 6 mm contact
+        distance, so a pair cannot pass through between two solves.
+    bending_interval : substeps between bending (dihedral) solves, [1, 8], with the
+        stiffness scaled by its square so that the XPBD compliance per unit time is
+        unchanged (bending is soft: k Δt² ≪ the stability bound).
     """
 
     scene: str = "sphere"
@@ -107,6 +124,12 @@ class DrapeParameters:
     damping_per_s: float = 0.5
     particle_radius_m: float = 0.003
     self_contact: bool = True
+    turn_deg: float = 0.0
+    turn_start_s: float = 0.8
+    turn_duration_s: float = 1.2
+    contact_interval: int = 4
+    bending_interval: int = 3
+    self_contact_interval: int = 4
 
     def validate(self) -> "DrapeParameters":
         validate_choice("drape scene", self.scene, SCENES, error=DrapeError)
@@ -120,6 +143,12 @@ class DrapeParameters:
             ("friction", self.friction, 0.0, 2.0, True),
             ("damping_per_s", self.damping_per_s, 0.0, 10.0, True),
             ("particle_radius_m", self.particle_radius_m, 5e-4, 0.02, True),
+            ("contact_interval", self.contact_interval, 1, 16, True),
+            ("self_contact_interval", self.self_contact_interval, 1, 8, True),
+            ("bending_interval", self.bending_interval, 1, 8, True),
+            ("turn_deg", self.turn_deg, -720.0, 720.0, True),
+            ("turn_start_s", self.turn_start_s, 0.0, 1000.0, True),
+            ("turn_duration_s", self.turn_duration_s, 0.0, 1000.0, False),
         )
         for name, value, lo, hi, closed_lo in checks:
             ok = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
@@ -129,6 +158,11 @@ class DrapeParameters:
                 raise DrapeError(f"drape: expected {name} in {bracket}{lo:g}, {hi:g}], got {value!r}")
         if not isinstance(self.resolution, int) or isinstance(self.resolution, bool):
             raise DrapeError(f"drape: expected an integer resolution, got {self.resolution!r}")
+        for name in ("contact_interval", "self_contact_interval", "bending_interval"):
+            if not isinstance(getattr(self, name), int) or isinstance(getattr(self, name), bool):
+                raise DrapeError(f"drape: expected an integer {name}, got {getattr(self, name)!r}")
+        if self.turn_deg != 0.0 and self.scene != "garment":
+            raise DrapeError(f"drape: turn_deg needs scene 'garment' (a body that can turn), got scene {self.scene!r}")
         if not isinstance(self.self_contact, bool):
             raise DrapeError(f"drape: expected self_contact True or False, got {self.self_contact!r}")
         if not isinstance(self.seed, int) or isinstance(self.seed, bool) or self.seed < 0:
@@ -137,6 +171,17 @@ class DrapeParameters:
 
     def to_json(self) -> dict:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
+
+    def body_angle(self, t) -> np.ndarray:
+        """Rotation of the mannequin about z at times t [s], radians."""
+        x = np.clip((np.asarray(t, float) - self.turn_start_s) / self.turn_duration_s, 0.0, 1.0)
+        return math.radians(self.turn_deg) * 0.5 * (1.0 - np.cos(np.pi * x))
+
+    def body_rate(self, t) -> np.ndarray:
+        """Angular velocity of the mannequin at times t [rad/s]."""
+        x = (np.asarray(t, float) - self.turn_start_s) / self.turn_duration_s
+        inside = (x > 0.0) & (x < 1.0)
+        return np.where(inside, math.radians(self.turn_deg) * 0.5 * np.pi * np.sin(np.pi * x) / self.turn_duration_s, 0.0)
 
     def key(self) -> str:
         """SHA-256 of the canonical JSON: equal keys mean the same simulation."""
@@ -151,7 +196,8 @@ def frame_name(k: int) -> str:
 
 def build_scene(params: DrapeParameters) -> _scenes.SceneSpec:
     """The cloth (with its seeded initial perturbation) and colliders of a scene."""
-    make = _scenes.sphere_scene if params.scene == "sphere" else _scenes.dressform_scene
+    make = {"sphere": _scenes.sphere_scene, "dressform": _scenes.dressform_scene,
+            "garment": _scenes.garment_scene}[params.scene]
     spec = make(params.resolution, params.density_kg_m2, params.stretch_stiffness_n_m, params.shear_ratio)
     rng = np.random.default_rng(params.seed)
     cloth = spec.cloth
@@ -200,6 +246,12 @@ def _import_newton():
     except ImportError as exc:  # pragma: no cover - depends on the install
         raise ImportError(f"kesbrdf drape needs warp-lang and newton: install kesbrdf[cloth] ({exc})") from None
     wp.config.log_level = wp.LOG_WARNING  # no per-module compile/load lines
+    # kesbrdf never differentiates the simulation: without backward passes newton's
+    # kernels compile in about a third of the time (80 s -> 24 s on a fresh 2-core
+    # machine) and the forward code, hence every position, is bit-identical.  Warp
+    # reads this when each module is created, i.e. when newton is imported.
+    if "newton" not in sys.modules:
+        wp.config.enable_backward = False
     _init_warp_quietly(wp)
     try:
         with warnings.catch_warnings():
@@ -251,9 +303,18 @@ class _Simulator:
         builder = newton.ModelBuilder()  # z up, gravity 9.81 m/s² downward
         cfg = builder.default_shape_cfg.copy()
         cfg.mu = params.friction
+        self.body = -1
         for c in spec.colliders:
             xform = wp.transform(wp.vec3(*c.center), _quat_z_to(wp, c.axis))
-            if c.kind == "sphere":
+            if c.kind == "mesh":
+                # the mannequin: a triangle mesh on a kinematic body whose pose we prescribe
+                v, _, _, f = _scenes.collider_mesh(c)
+                mesh = newton.Mesh(v, f.ravel(), compute_inertia=False)
+                self.body = builder.add_link(xform=wp.transform_identity(), mass=0.0, is_kinematic=True, label=c.label)
+                body_cfg = cfg.copy()
+                body_cfg.has_shape_collision = False  # cloth only: no rigid contacts with the stand or floor
+                builder.add_shape_mesh(self.body, mesh=mesh, cfg=body_cfg, label=c.label)
+            elif c.kind == "sphere":
                 builder.add_shape_sphere(-1, xform=xform, radius=c.radius, cfg=cfg, label=c.label)
             elif c.kind == "capsule":
                 builder.add_shape_capsule(-1, xform=xform, radius=c.radius, half_height=c.half_height, cfg=cfg, label=c.label)
@@ -274,11 +335,19 @@ class _Simulator:
             )
         for k, (m, pinned) in enumerate(zip(cloth.masses, cloth.pinned)):
             builder.particle_mass[start + k] = 0.0 if pinned else float(m)
+        if cloth.seams is not None and cloth.seam_radius is not None:
+            # stitched vertices sit seam_radius·2 apart: their contact distance must agree
+            for k in np.unique(cloth.seams).tolist():
+                builder.particle_radius[start + k] = float(cloth.seam_radius)
         for (i, j), ke in zip(cloth.springs.tolist(), cloth.spring_ke.tolist()):
             builder.add_spring(start + i, start + j, ke, 0.0, 0.0)
         self.start = start
         self.count = len(cloth.positions)
         self.model = builder.finalize(device=self.device)
+        if cloth.spring_rest is not None:  # rest lengths of the flat pattern, not of the placed panels
+            self.model.spring_rest_length.assign(np.asarray(cloth.spring_rest, np.float32))
+        if cloth.flat_rest and self.model.edge_count:  # flat cloth: every hinge rests at 0
+            self.model.edge_rest_angle.zero_()
         self.model.particle_mu = params.friction
         self.model.soft_contact_mu = params.friction
         self.solver = newton.solvers.SolverXPBD(self.model, iterations=1)
@@ -289,13 +358,36 @@ class _Simulator:
             warnings.simplefilter("ignore")
             self.pipeline = newton.CollisionPipeline(self.model, soft_contact_gap=0.01)
         self.contacts = self.pipeline.contacts()
-        if not params.self_contact:
-            # no particle-particle contacts: XPBD skips its hash grid (about half the step time)
-            self.model.particle_grid = None
-            self.model.particle_max_radius = 0.0
+        self.grid = None
+        self.max_radius = self.model.particle_max_radius
+        if params.self_contact:
+            # newton allocates a 128³ hash grid and clears all 2 M cells on every rebuild
+            # (each substep): a fifth of the step time on a 64² cloth.  The grid is
+            # periodic, so a smaller one only aliases far-apart particles into the same
+            # cell, and the exact distance test drops them again: the contacts, hence the
+            # positions, are bit-identical (tested in benchmarks/bench_drape.py).
+            self.grid = wp.HashGrid(HASH_GRID_DIM, HASH_GRID_DIM, HASH_GRID_DIM, device=self.device)
+            self.grid.reserve(self.model.particle_count)
+        self.model.particle_grid = None
+        self.model.particle_max_radius = 0.0
+        self.params = params
+        self.pinned = np.flatnonzero(cloth.pinned) + start
+        self.pinned_rest = np.asarray(cloth.positions, np.float64)[cloth.pinned]
         self.substeps, _ = substeps_for(cloth, params.fps)
         self.dt = 1.0 / params.fps / self.substeps
         self.decay = math.exp(-params.damping_per_s * self.dt)
+        self.contact_interval = params.contact_interval
+        self.bending_interval = params.bending_interval
+        self.edge_count = self.model.edge_count
+        self.bending = None
+        if self.edge_count and self.bending_interval > 1:
+            # XPBD's compliance is 1 / (k Δt²): solving the hinge every n-th substep with
+            # n² k gives it the compliance of one step of length n Δt (same stiffness in time)
+            props = self.model.edge_bending_properties.numpy().copy()
+            props[:, 0] *= self.bending_interval ** 2
+            self.bending = wp.array(props, dtype=self.model.edge_bending_properties.dtype, device=self.device)
+            self.model.edge_bending_properties = self.bending
+        self.self_contact_interval = params.self_contact_interval
 
     def get(self) -> tuple[np.ndarray, np.ndarray]:
         sl = slice(self.start, self.start + self.count)
@@ -311,10 +403,48 @@ class _Simulator:
             state.particle_q.assign(wp.array(all_q, dtype=wp.vec3, device=self.device))
             state.particle_qd.assign(wp.array(all_qd, dtype=wp.vec3, device=self.device))
 
-    def step_frame(self) -> None:
-        for _ in range(self.substeps):
+    def _pose_body(self, t0: float, t1: float) -> None:
+        """Prescribe the mannequin's turn for the substep [t0, t1].
+
+        The kinematic body is posed at t1 (newton copies a kinematic body's state through
+        the solve); the pinned waistband starts at its t0 position with the rigid
+        velocity ω × r, which newton integrates to t1 (zero-mass particles keep their
+        velocity).  Both are set afresh every substep, so nothing drifts.
+        """
+        if self.body < 0 or self.params.turn_deg == 0.0:
+            return
+        ang1 = float(self.params.body_angle(t1))
+        rate1 = float(self.params.body_rate(t1))
+        for state in (self.state_0, self.state_1):
+            bq = state.body_q.numpy()  # views of the CPU arrays
+            bq[self.body] = (0.0, 0.0, 0.0, 0.0, 0.0, math.sin(0.5 * ang1), math.cos(0.5 * ang1))
+            state.body_qd.numpy()[self.body] = (0.0, 0.0, 0.0, 0.0, 0.0, rate1)
+        ang0 = float(self.params.body_angle(t0))
+        rate = (ang1 - ang0) / (t1 - t0)  # secant rate over the substep
+        c, s = math.cos(ang0), math.sin(ang0)
+        p = self.pinned_rest
+        q = self.state_0.particle_q.numpy()
+        qd = self.state_0.particle_qd.numpy()
+        x = c * p[:, 0] - s * p[:, 1]
+        y = s * p[:, 0] + c * p[:, 1]
+        q[self.pinned, 0], q[self.pinned, 1], q[self.pinned, 2] = x, y, p[:, 2]
+        qd[self.pinned, 0], qd[self.pinned, 1], qd[self.pinned, 2] = -rate * y, rate * x, 0.0
+
+    def step_frame(self, k: int = 1) -> None:
+        """Advance from frame k − 1 to frame k."""
+        t0 = (k - 1) / self.params.fps
+        for s in range(self.substeps):
+            self._pose_body(t0 + s * self.dt, t0 + (s + 1) * self.dt)
             self.state_0.clear_forces()
-            self.pipeline.collide(self.state_0, self.contacts)
+            if s % self.contact_interval == 0:
+                self.pipeline.collide(self.state_0, self.contacts)
+            if self.bending is not None:  # bending on every bending_interval-th substep
+                on = s % self.bending_interval == 0
+                self.model.edge_count = self.edge_count if on else 0
+            if self.grid is not None:  # self-contact on every self_contact_interval-th substep
+                on = s % self.self_contact_interval == 0
+                self.model.particle_grid = self.grid if on else None
+                self.model.particle_max_radius = self.max_radius if on else 0.0
             self.solver.step(self.state_0, self.state_1, self.control, self.contacts, self.dt)
             self.state_0, self.state_1 = self.state_1, self.state_0
             if self.decay != 1.0:
@@ -374,9 +504,13 @@ def _manifest(params, frames_total, done, spec, collider_files, sim_info, resume
         "complete": done + 1 >= frames_total,
         "colliders": [{"file": f, **c.to_json()} for f, c in zip(collider_files, spec.colliders)],
         "ground": {"kind": "plane", "height": spec.ground_height, "normal": [0.0, 0.0, 1.0]},
-        "uv": {"u": "warp (cloth grid's first axis), rest-state arc length in metres",
-               "v": "weft (cloth grid's second axis), rest-state arc length in metres"},
-        "cloth": {"grid": list(spec.cloth.shape), "closed_weft": spec.cloth.closed,
+        "body_rotation_deg": [round(math.degrees(float(params.body_angle(k / params.fps))), 6) for k in range(done + 1)],
+        "uv": ({"u": "warp: distance down each panel's grain line in the flat pattern, metres",
+                "v": "weft: distance across the panel in the flat pattern, metres"} if spec.cloth.seams is not None else
+               {"u": "warp (cloth grid's first axis), rest-state arc length in metres",
+                "v": "weft (cloth grid's second axis), rest-state arc length in metres"}),
+        "cloth": {"grid": list(spec.cloth.shape), "closed_weft": spec.cloth.closed, "panels": spec.cloth.panels,
+                  "seams": None if spec.cloth.seams is None else spec.cloth.seams.tolist(),
                   "vertices": int(len(spec.cloth.output_index)), "faces": int(len(spec.cloth.output_faces))},
         "parameters": params.to_json(),
         "parameters_sha256": params.key(),
@@ -518,7 +652,7 @@ def _run(spec, params, out_dir, key, frames, start_frame, state, finish, progres
     if progress:
         progress(start_frame + 1, frames)
     for k in range(start_frame + 1, frames):
-        sim.step_frame()
+        sim.step_frame(k)
         q, qd = sim.get()
         if not np.isfinite(q).all():
             raise DrapeError(f"drape: the simulation diverged at frame {k} (non-finite positions); "

@@ -7,6 +7,9 @@ World frame: metres, **z up**, floor at z = 0 (newton's default up axis).
 * ``dressform``: an A-line skirt (a cone frustum of cloth, warp running down the skirt)
   whose waist edge is pinned just outside the waist of a dress form built from
   capsules (hips, torso, bust, shoulders, neck, stand) and a box (base).
+* ``garment``: a six-gore skirt cut from flat pattern panels and sewn at its seams
+  (:mod:`kesbrdf.cloth.pattern`) on a smooth procedural mannequin
+  (:mod:`kesbrdf.cloth.mannequin`, a triangle-mesh collider that can turn about z).
 
 Cloth grids are indexed ``(i, j)``: ``i`` runs along the **warp** (the grid's first axis),
 ``j`` along the **weft**.  Texture coordinates are rest-state arc lengths in metres:
@@ -21,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["Collider", "ClothPiece", "SceneSpec", "sheet", "skirt", "sphere_scene", "dressform_scene",
-           "collider_mesh", "signed_distance"]
+           "garment_scene", "collider_mesh", "signed_distance"]
 
 
 @dataclass(frozen=True)
@@ -29,7 +32,9 @@ class Collider:
     """A static collision primitive.
 
     kind : ``"sphere"`` (center, radius), ``"capsule"`` (center, unit axis, radius,
-    half_height of the cylindrical part) or ``"box"`` (center, half_extents, axis-aligned).
+    half_height of the cylindrical part), ``"box"`` (center, half_extents, axis-aligned)
+    or ``"mesh"`` (the procedural mannequin of :mod:`kesbrdf.cloth.mannequin`; it turns
+    with the scene's body rotation when ``moves`` is true).
     """
 
     kind: str
@@ -39,6 +44,7 @@ class Collider:
     half_height: float = 0.0
     half_extents: tuple[float, float, float] = (0.0, 0.0, 0.0)
     label: str = ""
+    moves: bool = False
 
     def to_json(self) -> dict:
         d = {"kind": self.kind, "label": self.label, "center": list(self.center)}
@@ -49,6 +55,9 @@ class Collider:
             d["half_height"] = self.half_height
         if self.kind == "box":
             d["half_extents"] = list(self.half_extents)
+        if self.kind == "mesh":
+            d["source"] = "kesbrdf.cloth.mannequin (procedural)"
+            d["moves"] = bool(self.moves)
         return d
 
 
@@ -77,6 +86,14 @@ class ClothPiece:
     output_index: np.ndarray = field(default=None)  # (n_out,) simulation vertex of each output vertex
     output_uv: np.ndarray = field(default=None)
     output_faces: np.ndarray = field(default=None)
+    # sewn garments (kesbrdf.cloth.pattern): rest lengths from the flat pattern, flat
+    # bending rest angles, stitched vertex pairs and their contact radius [m]
+    spring_rest: np.ndarray | None = None
+    flat_rest: bool = False
+    seams: np.ndarray | None = None
+    seam_radius: float | None = None
+    panels: int = 1
+    clearance: dict | None = None
 
 
 @dataclass
@@ -218,6 +235,26 @@ def dressform_scene(resolution: int, density: float, stretch: float, shear: floa
     return SceneSpec("dressform", cloth, list(DRESS_FORM))
 
 
+#: The mannequin's stand (static: the body turns on it).
+MANNEQUIN_STAND: tuple[Collider, ...] = (
+    Collider("capsule", (0.0, 0.0, 0.30), 0.018, (0.0, 0.0, 1.0), 0.27, label="stand"),
+    Collider("box", (0.0, 0.0, 0.012), half_extents=(0.2, 0.2, 0.012), label="base"),
+)
+
+
+def garment_scene(resolution: int, density: float, stretch: float, shear: float) -> SceneSpec:
+    """A six-gore skirt sewn from pattern panels on the procedural mannequin.
+
+    ``resolution`` 48 gives 24 rows down and 8 cells across each gore (``resolution // 2``
+    and ``max(resolution // 6, 3)``).
+    """
+    from kesbrdf.cloth import pattern as _pattern
+
+    cloth = _pattern.gored_skirt(max(resolution // 2, 4), max(resolution // 4, 3), density, stretch, shear)
+    body = Collider("mesh", (0.0, 0.0, 0.0), label="mannequin", moves=True)
+    return SceneSpec("garment", cloth, [body, *MANNEQUIN_STAND])
+
+
 # -- collider geometry ----------------------------------------------------------------
 def _frame(axis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     a = np.asarray(axis, float) / np.linalg.norm(axis)
@@ -229,6 +266,10 @@ def _frame(axis) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def collider_mesh(c: Collider, segments: int = 48):
     """Triangulate a collider: ``(vertices, normals, uv, faces)`` with outward normals."""
+    if c.kind == "mesh":
+        from kesbrdf.cloth.mannequin import mannequin_mesh
+
+        return mannequin_mesh()
     if c.kind == "box":
         h = np.asarray(c.half_extents, float)
         verts, norms, uvs, faces = [], [], [], []
@@ -273,8 +314,17 @@ def collider_mesh(c: Collider, segments: int = 48):
     return verts.astype(np.float32), normal.reshape(-1, 3).astype(np.float32), uv.astype(np.float32), faces.astype(np.int32)
 
 
-def signed_distance(c: Collider, points) -> np.ndarray:
-    """Signed distance [m] from points (..., 3) to the collider's surface (< 0 inside)."""
+def signed_distance(c: Collider, points, rotation_z: float = 0.0) -> np.ndarray:
+    """Signed distance [m] from points (..., 3) to the collider's surface (< 0 inside).
+
+    For the mannequin (``"mesh"``) only the inside is measured (minus the depth of
+    :func:`kesbrdf.cloth.mannequin.inside_depth`, 0 outside), with the body turned by
+    ``rotation_z`` [rad].
+    """
+    if c.kind == "mesh":
+        from kesbrdf.cloth.mannequin import inside_depth
+
+        return -inside_depth(points, rotation_z)
     p = np.asarray(points, float) - np.asarray(c.center, float)
     if c.kind == "sphere":
         return np.linalg.norm(p, axis=-1) - c.radius

@@ -8,7 +8,9 @@ Debian's ``libllvm19`` is installed, it is pointed at that library.
 Modules: :mod:`~kesbrdf.render.bsdf` (the plugin), :mod:`~kesbrdf.render.sampling`
 (importance sampling), :mod:`~kesbrdf.render.scenes` (sphere, swatch, drape and dress
 form scenes as Mitsuba scene dicts), :mod:`~kesbrdf.render.animation` (drape sequence
-to MP4/GIF, resumable), :mod:`~kesbrdf.render.colourways` (contact sheet).
+to MP4/GIF, resumable), :mod:`~kesbrdf.render.colourways` (contact sheet),
+:mod:`~kesbrdf.render.studio` (soft boxes, procedural HDR room), :mod:`~kesbrdf.render.post`
+(ACES tone curve, OIDN denoising).
 """
 
 from __future__ import annotations

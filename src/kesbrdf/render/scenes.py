@@ -15,6 +15,10 @@ Scenes (``SCENES``):
 ``dressform``
     A dress form built from primitives (ellipsoid torso, neck, pole, base) wearing a
     garment: the drape folder's frame when given, else a procedural flared skirt.
+``garment``
+    A ``kesbrdf drape --scene garment`` folder: the gored skirt on the procedural
+    mannequin (turned by the frame's ``body_rotation_deg``), on a studio floor, framed
+    on the skirt and the torso, seen from the front.
 
 Lighting needs no downloads (``ENVIRONMENTS``, ``LIGHTS``): a generated latitude–
 longitude map (``sky``: gradient sky with a sun; ``studio``: dark room with two soft
@@ -55,11 +59,15 @@ __all__ = [
     "render_still",
 ]
 
-SCENES = ("sphere", "swatch", "drape", "dressform")
-ENVIRONMENTS = ("studio", "sky", "uniform", "none")
-LIGHTS = ("area", "sun", "none")
+SCENES = ("sphere", "swatch", "drape", "dressform", "garment")
+ENVIRONMENTS = ("studio", "sky", "uniform", "none", "studio-hdr", "sunsky")
+LIGHTS = ("area", "sun", "none", "studio")
 #: Largest image accepted (pixels): 8K UHD.  Bigger requests are a typo, not a render.
 MAX_PIXELS = 7680 * 4320
+#: Floor under the studio soft boxes: dark grey, so the fabric, not the floor, carries the shot.
+STUDIO_FLOOR_ALBEDO = (0.14, 0.14, 0.145)
+#: Diffuse albedo of the mannequin (a warm ivory jersey cover).
+MANNEQUIN_ALBEDO = (0.62, 0.58, 0.52)
 #: Diffuse albedo of floors and dress forms.
 PROP_ALBEDO = (0.42, 0.42, 0.42)
 #: Vertical field of view of the camera, degrees.
@@ -87,11 +95,16 @@ class RenderOptions:
     #: lobe beyond the last measured deviation (kesbrdf plugin ``extrapolation``):
     #: renders fade it (measured closer to the reference satins, docs/rendering.md)
     extrapolation: str = "fade"
+    tonemap: str = "clip"
+    denoise: bool = False
     integrator: dict | None = field(default=None, repr=False)
 
     def validate(self) -> "RenderOptions":
         validate_choice("environment", self.env, ENVIRONMENTS)
         validate_choice("light", self.light, LIGHTS)
+        from kesbrdf.render.post import CURVES
+
+        validate_choice("tone curve", self.tonemap, CURVES)
         w, h = self.resolution
         if not (int(w) > 0 and int(h) > 0 and int(self.spp) > 0):
             raise KesbrdfError(f"expected positive resolution and spp, got {w}x{h} and {self.spp}")
@@ -122,6 +135,8 @@ class Drape:
     colliders: list[Path]
     scene: str
     up_axis: str
+    body_rotation_deg: list | None = None
+    moving: tuple = ()
 
 
 def read_drape(path) -> Drape:
@@ -146,7 +161,10 @@ def read_drape(path) -> Drape:
         colliders.append(root / str(name))
     up = str(meta.get("up_axis") or _guess_up_axis(frames[0], frames[-1])).lower()
     validate_choice("up_axis", up, ("y", "z"), meta_path, error=FormatError)
-    return Drape(root, float(meta.get("fps", 24.0)), frames, colliders, str(meta.get("scene", "sphere")), up)
+    moving = tuple(k for k, c in enumerate(meta.get("colliders", [])) if isinstance(c, dict) and c.get("moves"))
+    rot = meta.get("body_rotation_deg")
+    return Drape(root, float(meta.get("fps", 24.0)), frames, colliders, str(meta.get("scene", "sphere")), up,
+                 [float(a) for a in rot] if isinstance(rot, list) else None, moving)
 
 
 def _centroid(path) -> np.ndarray:
@@ -222,7 +240,13 @@ def environment_bitmap(kind: str, width: int = 256) -> np.ndarray:
 
 def _lights(opts: RenderOptions, center, radius, key_dir=(0.45, 0.72, 0.6)) -> dict:
     out = {}
-    if opts.env != "none":
+    if opts.env == "studio-hdr":
+        from kesbrdf.render.studio import environment_map
+
+        out["environment"] = {"type": "envmap", "bitmap": mi.Bitmap(environment_map())}
+    elif opts.env == "sunsky":
+        out["environment"] = {"type": "sunsky", "sun_direction": [-0.45, 0.75, 0.5]}
+    elif opts.env != "none":
         out["environment"] = {"type": "envmap", "bitmap": mi.Bitmap(environment_bitmap(opts.env))}
     if opts.light == "area":
         c = np.asarray(center)
@@ -235,6 +259,10 @@ def _lights(opts: RenderOptions, center, radius, key_dir=(0.45, 0.72, 0.6)) -> d
             @ mi.ScalarTransform4f().scale([size, size, 1.0]),
             "emitter": {"type": "area", "radiance": {"type": "rgb", "value": [9.0, 8.8, 8.4]}},
         }
+    elif opts.light == "studio":
+        from kesbrdf.render.studio import studio_lights
+
+        out.update(studio_lights(mi, center, radius))
     elif opts.light == "sun":
         out["sun"] = {
             "type": "directional",
@@ -256,15 +284,23 @@ def _camera(opts: RenderOptions, center, radius, direction=(0.0, 0.55, 1.0)) -> 
         "fov": fov,
         "fov_axis": "y" if w >= h else "x",
         "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=list(map(float, center)), up=[0, 1, 0]),
-        "film": {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgb", "rfilter": {"type": "gaussian"}},
+        # OIDN needs uncorrelated per-pixel noise: a box filter when denoising (a Gaussian
+        # spreads each sample over neighbouring pixels and the denoiser keeps that noise)
+        "film": {"type": "hdrfilm", "width": w, "height": h, "pixel_format": "rgb",
+                 "rfilter": {"type": "box" if opts.denoise else "gaussian"}},
         "sampler": {"type": "independent", "sample_count": int(opts.spp), "seed": int(opts.seed)},
     }
 
 
-def _ply_shape(path, bsdf: dict, up_axis: str = "y") -> "mi.Shape":
+def _ply_shape(path, bsdf: dict, up_axis: str = "y", turn_deg: float = 0.0) -> "mi.Shape":
+    """A PLY file as a shape; z-up files are turned y-up, ``turn_deg`` about the up axis first."""
     d = {"type": "ply", "filename": str(path), "bsdf": bsdf}
+    T = mi.ScalarTransform4f
+    spin = T().rotate([0, 0, 1] if up_axis == "z" else [0, 1, 0], float(turn_deg))
     if up_axis == "z":
-        d["to_world"] = mi.ScalarTransform4f().rotate([1, 0, 0], -90)
+        d["to_world"] = T().rotate([1, 0, 0], -90) @ spin
+    elif turn_deg:
+        d["to_world"] = spin
     return mi.load_dict(d)
 
 
@@ -352,9 +388,14 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
             if not 0 <= index < len(drape.frames):
                 raise KesbrdfError(f"{where(drape.root)}expected a frame index in [0, {len(drape.frames) - 1}], got {frame}")
             shapes["cloth"] = _ply_shape(drape.frames[index], bsdf, drape.up_axis)
+            turn = drape.body_rotation_deg[index] if drape.body_rotation_deg and index < len(drape.body_rotation_deg) else 0.0
+            prop = _diffuse(MANNEQUIN_ALBEDO) if scene == "garment" else _diffuse((0.5, 0.48, 0.45))
             for k, c in enumerate(drape.colliders):
                 if c.is_file():
-                    shapes[f"collider_{k}"] = _ply_shape(c, _diffuse((0.5, 0.48, 0.45)), drape.up_axis)
+                    shapes[f"collider_{k}"] = _ply_shape(c, prop if k in drape.moving else _diffuse((0.5, 0.48, 0.45)),
+                                                         drape.up_axis, turn if k in drape.moving else 0.0)
+        elif scene == "garment":
+            raise KesbrdfError("scene 'garment' needs a drape folder from `kesbrdf drape --scene garment`")
         elif scene == "drape":
             p, n, uv, f = _mesh.folded_cloth()
             shapes["cloth"] = _mesh_shape(workdir, "folded", (p, n, _mesh.rotate_uv(uv, opts.uv_rotation_deg), f), bsdf)
@@ -369,6 +410,8 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
             # frame the garment and the torso above it, not the whole stand
             lo = np.minimum(lo, [-0.2, 0.4, -0.2])
             hi = np.maximum(hi, [0.2, 1.45, 0.2])
+        if scene == "garment" and framing is None:
+            framing = garment_framing()
         if framing is None:
             center = 0.5 * (lo + hi)
             radius = 0.5 * float(np.linalg.norm(hi - lo))
@@ -384,12 +427,47 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
                 "to_world": T().translate([float(center[0]), floor_y - 1e-3, float(center[2])])
                 @ T().rotate([1, 0, 0], -90)
                 @ T().scale(max(8 * radius, 12.0)),
-                "bsdf": _diffuse(),
+                "bsdf": _diffuse(STUDIO_FLOOR_ALBEDO if opts.light == "studio" else PROP_ALBEDO),
             }
+        if scene == "garment":
+            view_dir = (0.12, 0.12, 1.0)  # a fashion shot: nearly level, slightly from the right
+            if floor and opts.floor:
+                d["backdrop"] = _backdrop(center, radius)
         d.update(_lights(opts, center, radius, key_dir))
         d["sensor"] = _camera(opts, center, radius, view_dir)
-        d["integrator"] = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
+        integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
+        if opts.denoise:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
+            integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
+        d["integrator"] = integ
         return mi.load_dict(d)
+
+
+def garment_framing():
+    """(center, radius) of the garment shot (y up): hem to shoulders of the mannequin."""
+    return np.array([0.0, 0.86, 0.0]), 0.62
+
+
+def _backdrop(center, radius) -> dict:
+    """A seamless paper backdrop behind the subject (a curved sweep, dark grey)."""
+    n = 24
+    t = np.linspace(0.0, np.pi / 2, n)
+    R = 0.8
+    back = -1.6  # z of the vertical part (y up, camera on +z)
+    yz = np.stack([R - R * np.cos(t), back + R - R * np.sin(t)], -1)  # floor -> wall quarter circle
+    yz = np.concatenate([[[0.0, 3.0]], yz, [[4.0, back]]])
+    xs = np.array([-6.0, 6.0])
+    p = np.stack([np.repeat(xs[None, :], len(yz), 0), np.repeat(yz[:, :1], 2, 1), np.repeat(yz[:, 1:], 2, 1)], -1)
+    verts = p.reshape(-1, 3)
+    i = np.arange(len(yz) - 1)
+    faces = np.concatenate([np.stack([2 * i, 2 * i + 1, 2 * i + 3], -1), np.stack([2 * i, 2 * i + 3, 2 * i + 2], -1)])
+    v = mi.Float(verts.astype(np.float32).ravel())
+    mesh = mi.Mesh("backdrop", len(verts), len(faces))
+    params = mi.traverse(mesh)
+    params["vertex_positions"] = v
+    params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
+    params.update()
+    mesh.set_bsdf(mi.load_dict(_diffuse((0.16, 0.16, 0.17))))
+    return mesh
 
 
 def scene_framing(drape: Drape):
@@ -401,20 +479,36 @@ def scene_framing(drape: Drape):
 
 
 def render_scene(scene: "mi.Scene", opts: RenderOptions) -> np.ndarray:
-    """Render to a linear RGB float array (H, W, 3)."""
+    """Render to a linear RGB float array (H, W, 3), denoised when ``opts.denoise``.
+
+    With ``denoise`` the scene was loaded with Mitsuba's ``aov`` integrator around the
+    path tracer (:func:`load_scene`); its channels are colour, albedo, shading normal,
+    and :func:`kesbrdf.render.post.denoise` (Open Image Denoise) uses the last two.
+    """
     img = mi.render(scene, spp=int(opts.spp), seed=int(opts.seed))
     dr.eval(img)
-    return np.array(img, dtype=np.float32)[..., :3]
+    arr = np.array(img, dtype=np.float32)
+    if opts.denoise and arr.shape[-1] >= 9:
+        from kesbrdf.render.post import denoise
+
+        return denoise(arr[..., :3], arr[..., 3:6], arr[..., 6:9])
+    return arr[..., :3]
 
 
-def to_srgb8(img: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """Linear RGB → 8-bit sRGB (clipped), with exposure in stops."""
+def to_srgb8(img: np.ndarray, exposure: float = 0.0, tonemap: str = "clip") -> np.ndarray:
+    """Linear RGB → 8-bit sRGB, with exposure in stops; ``tonemap`` "clip" or "aces"
+    (the filmic curve of :mod:`kesbrdf.render.post`)."""
+    if tonemap != "clip":
+        from kesbrdf.render.post import to_srgb8 as filmic_srgb8
+
+        return filmic_srgb8(img, exposure, tonemap)
     x = np.clip(np.nan_to_num(img) * (2.0 ** exposure), 0, 1)
     s = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1 / 2.4) - 0.055)
     return (s * 255 + 0.5).astype(np.uint8)
 
 
-def save_image(path, img: np.ndarray, metadata: dict | None = None, exposure: float = 0.0) -> Path:
+def save_image(path, img: np.ndarray, metadata: dict | None = None, exposure: float = 0.0,
+               tonemap: str = "clip") -> Path:
     """Write a render atomically: ``.exr`` linear, ``.png``/``.jpg`` sRGB 8-bit.
 
     PNG files carry ``metadata`` as JSON in a ``kesbrdf`` text chunk.
@@ -430,7 +524,7 @@ def save_image(path, img: np.ndarray, metadata: dict | None = None, exposure: fl
         if ext == ".exr":
             mi.Bitmap(np.ascontiguousarray(img, np.float32)).write(str(tmp), mi.Bitmap.FileFormat.OpenEXR)
         elif ext in (".png", ".jpg", ".jpeg"):
-            im = Image.fromarray(to_srgb8(img, exposure))
+            im = Image.fromarray(to_srgb8(img, exposure, tonemap))
             if ext == ".png":
                 info = PngInfo()
                 if metadata:
@@ -469,4 +563,4 @@ def render_still(model_path, scene: str, output, opts: RenderOptions, drape=None
         drape = read_drape(drape)
     sc = load_scene(model_path, scene, opts, drape=drape, frame=frame)
     img = render_scene(sc, opts)
-    return save_image(output, img, provenance(model_path, scene, opts, drape), opts.exposure)
+    return save_image(output, img, provenance(model_path, scene, opts, drape), opts.exposure, opts.tonemap)

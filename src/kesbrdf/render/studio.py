@@ -1,0 +1,116 @@
+"""A photo studio for fabric renders: area lights (soft boxes) and a procedural HDR room.
+
+Everything is generated here (nothing is downloaded).  World space is the renderer's:
+y up, the camera in front of the subject on +z.
+
+Lights (:func:`studio_lights`), placed around the subject's centre ``c`` at distances
+in units of its bounding radius ``r``, the way a fashion shoot is lit:
+
+=========  ============================  ===========  ==========================
+light      direction from c (x, y, z)    size (r)     radiance (relative)
+=========  ============================  ===========  ==========================
+key        (−0.55, 0.55, 0.80), 3.2 r   1.3 × 1.7    1.0  (soft box, camera left)
+fill       (0.85, 0.15, 0.55), 3.5 r    1.8 × 1.8    0.22 (large, dim, right)
+rim        (0.45, 0.50, −0.80), 3.0 r   0.35 × 2.2   1.6  (strip light behind)
+top        (0.0, 1.0, 0.1), 3.0 r       1.6 × 1.6    0.35 (overhead)
+=========  ============================  ===========  ==========================
+
+The rectangles face the subject.  A satin's narrow lobe reflects the soft boxes as
+elongated highlights that slide along the folds; the rim strip draws the sheen on the
+far edges of folds.  The absolute scale :data:`KEY_RADIANCE` makes a white diffuse
+card facing the key read about 0.7 after the ACES curve at exposure 0.
+
+Environment (:func:`environment_map`, kind ``"studio-hdr"``): a latitude–longitude HDR
+of a dark grey room (floor 0.02, walls 0.035, ceiling 0.03) with the reflections of
+two large overhead soft boxes (radiance 4) and a vertical strip behind the camera
+(radiance 2.5): what a mirror-like lobe sees away from the area lights.  Mitsuba's
+``sunsky`` emitter (present in Mitsuba ≥ 3.6) can be used instead (``env="sunsky"``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle"]
+
+#: (name, direction from the subject, distance / r, (width, height) / r, relative radiance)
+STUDIO_LIGHTS = (
+    ("key", (-0.55, 0.55, 0.80), 3.2, (1.3, 1.7), 1.0),
+    ("fill", (0.85, 0.15, 0.55), 3.5, (1.8, 1.8), 0.22),
+    ("rim", (0.35, 1.0, -0.60), 3.0, (0.35, 2.2), 1.6),
+    ("top", (0.0, 1.0, 0.1), 3.0, (1.6, 1.6), 0.35),
+)
+#: Radiance of the key soft box (W sr⁻¹ m⁻² per unit RGB); slightly warm white.
+KEY_RADIANCE = (6.0, 5.8, 5.5)
+
+
+def look_at_rectangle(mi, origin, target, size, up=(0.0, 1.0, 0.0)):
+    """``to_world`` of a Mitsuba rectangle at ``origin`` facing ``target``, ``size`` = (w, h)."""
+    T = mi.ScalarTransform4f
+    o = np.asarray(origin, float)
+    t = np.asarray(target, float)
+    u = np.asarray(up, float)
+    if abs(np.dot((t - o) / np.linalg.norm(t - o), u)) > 0.99:  # looking straight down: another up
+        u = np.array([0.0, 0.0, -1.0])
+    return T().look_at(origin=o.tolist(), target=t.tolist(), up=u.tolist()) @ T().scale([0.5 * size[0], 0.5 * size[1], 1.0])
+
+
+def studio_lights(mi, center, radius, scale: float = 1.0) -> dict:
+    """Scene-dict entries of the four soft boxes around ``center`` (y up)."""
+    c = np.asarray(center, float)
+    out = {}
+    for name, direction, dist, (w, h), rel in STUDIO_LIGHTS:
+        d = np.asarray(direction, float)
+        d /= np.linalg.norm(d)
+        origin = c + dist * radius * d
+        rgb = [float(scale * rel * v) for v in KEY_RADIANCE]
+        out[f"studio_{name}"] = {
+            "type": "rectangle",
+            "to_world": look_at_rectangle(mi, origin, c, (w * radius, h * radius)),
+            "emitter": {"type": "area", "radiance": {"type": "rgb", "value": rgb}},
+        }
+    return out
+
+
+def environment_map(width: int = 512) -> np.ndarray:
+    """The procedural studio HDR (H = width / 2, W, 3), float32, y up, row 0 at the zenith.
+
+    Same lat-long convention as :func:`kesbrdf.render.scenes.environment_bitmap`
+    (Mitsuba's ``envmap``: u = atan2(x, −z) / 2π, v = θ / π).
+    """
+    h = width // 2
+    theta = (np.arange(h) + 0.5) / h * math.pi
+    phi = (np.arange(width) + 0.5) / width * 2 * math.pi
+    th, ph = np.meshgrid(theta, phi, indexing="ij")
+    d = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
+    up = d[..., 1]
+    # room: floor, walls, ceiling blended smoothly by elevation
+    wall = 0.035
+    base = np.where(up < 0, 0.02 + (wall - 0.02) * np.exp(-((up / 0.15) ** 2)),
+                    0.03 + (wall - 0.03) * np.exp(-((up / 0.3) ** 2)))
+    img = np.repeat(base[..., None], 3, axis=-1) * np.array([1.0, 0.99, 0.97])
+
+    def softbox(direction, half_w, half_h, radiance, softness=0.02):
+        n = np.asarray(direction, float)
+        n /= np.linalg.norm(n)
+        a = np.cross(n, [0.0, 1.0, 0.0])
+        if np.linalg.norm(a) < 1e-6:
+            a = np.array([1.0, 0.0, 0.0])
+        a /= np.linalg.norm(a)
+        b = np.cross(a, n)
+        cos_n = d @ n
+        # gnomonic coordinates on the box's plane, smooth edges
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x = np.where(cos_n > 0, (d @ a) / cos_n, 1e9)
+            y = np.where(cos_n > 0, (d @ b) / cos_n, 1e9)
+        def edge(v, half):  # logistic step, 1 inside the box, argument clipped (no overflow)
+            return 1.0 / (1.0 + np.exp(np.minimum((np.abs(v) - half) / softness, 60.0)))
+
+        return radiance * edge(x, half_w) * edge(y, half_h)
+
+    boxes = (softbox((-0.35, 1.0, 0.25), 0.35, 0.25, 4.0) + softbox((0.4, 1.0, -0.3), 0.3, 0.3, 3.0)
+             + softbox((0.1, 0.15, 1.0), 0.08, 0.45, 2.5))
+    img = img + boxes[..., None] * np.array([1.0, 0.98, 0.95])
+    return img.astype(np.float32)
