@@ -28,6 +28,7 @@ COMMANDS: dict[str, str] = {
     "fit": "fit",
     "eval": "eval_",
     "validate": "validate",
+    "plan": "plan",
     "plot": "plot",
     "report": "report",
     "render": "render",

@@ -1,0 +1,72 @@
+"""``kesbrdf plan``: expected hemisphere error of candidate protocols, and what to add."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from kesbrdf.cli._common import REFERENCES, make_reference, stderr
+
+HELP = "Plan a measurement: expected hemisphere error of candidate protocols within a sample budget."
+
+
+def add_arguments(p):
+    p.add_argument("--reference", action="append", default=[], metavar="NAME",
+                   help=f"reference BRDF to plan for (repeatable): {', '.join(REFERENCES)}")
+    p.add_argument("--model", action="append", default=[], metavar="MODEL",
+                   help="fitted model file used as the truth (repeatable)")
+    p.add_argument("--library", action="store_true", help="plan for every built-in reference")
+    p.add_argument("--budget", type=int, default=240, help="largest number of samples (default 240)")
+    p.add_argument("--noise", type=float, default=0.0, help="relative measurement noise (std / value)")
+    p.add_argument("-o", "--output", required=True, help="plan as JSON")
+    p.add_argument("--plot", help="also draw the plan (.png, .svg or .pdf)")
+
+
+def run(args) -> int:
+    from kesbrdf._atomic import write_text
+    from kesbrdf.errors import KesbrdfError
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".json":
+        raise KesbrdfError(f"-o {out}: expected a file ending in .json, got {out.suffix or 'no suffix'}")
+    if args.plot and Path(args.plot).suffix.lower() not in (".png", ".svg", ".pdf"):
+        raise KesbrdfError(f"--plot {args.plot}: expected a file ending in .png, .svg or .pdf")
+    truths = {}
+    for name in (REFERENCES if args.library else args.reference):
+        truths[name] = make_reference(name)
+    for path in args.model:
+        from kesbrdf.brdf import evaluate
+        from kesbrdf.model import load
+
+        model = load(path)
+
+        def as_truth(wi, wr, model=model):
+            return evaluate(model, wi, wr)
+
+        as_truth.channels = tuple(model.channels)
+        truths[Path(path).name] = as_truth
+    if not truths:
+        raise KesbrdfError("plan: expected --reference NAME, --model FILE or --library, got none")
+    from kesbrdf.planning import plan
+
+    result = plan(truths, budget=args.budget, noise=args.noise, progress=lambda msg: stderr(f"plan: {msg}"))
+    doc = result.to_dict()
+    write_text(out, json.dumps(doc, indent=1) + "\n")
+    for name, p in doc["protocols"].items():
+        if p.get("over_budget"):
+            stderr(f"  {name:20s} {p['n_samples']:4d} samples  over budget")
+        else:
+            stderr(f"  {name:20s} {p['n_samples']:4d} samples  expected hemisphere NRMSE {p['median']:.3f}  ({', '.join(p['kinds'])})")
+    rec = doc["recommendation"]
+    if len(rec) > 1:
+        stderr("recommended additions: " + ", ".join(f"{r['add']} (-> {r['median']:.3f} at {r['n_samples']})" for r in rec[1:]))
+    elif rec:
+        stderr(f"recommended: no addition within the budget improves on {rec[0]['groups']} ({rec[0]['median']:.3f})")
+    if args.plot:
+        from kesbrdf.plotting.planning import figure_plan
+        from kesbrdf.plotting.save import save_figure
+
+        save_figure(figure_plan(doc), args.plot, record={"plan": {"budget": args.budget, "truths": doc["truths"]}})
+        stderr(f"wrote {args.plot}")
+    stderr(f"wrote {out}")
+    return 0
