@@ -178,23 +178,11 @@ def simulate(truth, groups, noise: float = 0.0, rng=None) -> Measurement:
 
 
 def default_fit(m: Measurement):
-    """The fit a user gets by default: the kind that uses every row (DESIGN §4).
+    """The fit a user gets by default: :func:`kesbrdf.fit` with ``kind="auto"``."""
+    from kesbrdf.fitting import fit
 
-    Samples all on the paper's line → ``kes``; in-plane at several incidence angles →
-    ``kes-halfdiff``; any out-of-plane sample → the scattered fit.
-    """
-    on_line = m.is_in_plane & (np.abs(m.theta_i + m.theta_r - np.pi / 2) < 1e-9)
-    if on_line.all():
-        from kesbrdf.model import fit
-
-        return fit(m, fallback="log")
-    if m.is_in_plane.all():
-        from kesbrdf.halfdiff import fit_halfdiff
-
-        return fit_halfdiff(m, fallback="log")
-    from kesbrdf.scattered import fit_scattered
-
-    return fit_scattered(m)
+    model, _report = fit(m)
+    return model
 
 
 class _Truth:
