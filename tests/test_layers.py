@@ -31,14 +31,14 @@ PACKAGE = SRC / "kesbrdf"
 #: longest matching prefix.
 LAYERS = [
     ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry",
-              "kesbrdf.mappings"]),
+              "kesbrdf.mappings", "kesbrdf.marginal2d"]),
     ("measurement", ["kesbrdf.measurement"]),
     ("io", ["kesbrdf.io", "kesbrdf.kinds", "kesbrdf.references", "kesbrdf.gonio", "kesbrdf.acquisition",
             "kesbrdf.demo_data"]),
     ("kes", ["kesbrdf.kes"]),
     ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior", "kesbrdf.prior_model"]),
     ("brdf", ["kesbrdf.brdf", "kesbrdf.fitting", "kesbrdf"]),
-    ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare"]),
+    ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare", "kesbrdf.planning"]),
     ("apps", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.cli", "kesbrdf.viewer", "kesbrdf.cloth",
               "kesbrdf.export", "kesbrdf.batch"]),
 ]

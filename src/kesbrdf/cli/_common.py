@@ -4,57 +4,9 @@ from __future__ import annotations
 
 import sys
 
-from kesbrdf.errors import KesbrdfError, validate_choice
-
-REFERENCES = ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
-
-
-def make_reference(name: str, params: str | None = None, flag: str = "--params"):
-    """Build a reference BRDF by name (one registry; the error lists the names).
-
-    ``params`` is the JSON text of the option ``flag``, checked by :func:`kesbrdf.cli._params.parse_params`.
-    """
-    from kesbrdf.cli._params import parse_params
-
-    validate_choice("reference", name, REFERENCES)
-    extra = parse_params(name, params, flag)
-    try:
-        return _build_reference(name, extra)
-    except KesbrdfError:
-        raise
-    except (TypeError, ValueError) as exc:  # a combination the per-parameter checks cannot see
-        raise KesbrdfError(f"{flag} for reference {name}: {' '.join(str(exc).split())}") from None
-
-
-def _build_reference(name: str, extra: dict):
-    if name == "ward":
-        from kesbrdf.references.ward import AnisotropicWard
-
-        kw = {"alpha_x": 0.12, "alpha_y": 0.3, "rho_d": [0.25, 0.2, 0.15], "rho_s": 0.15, **extra}
-        return AnisotropicWard(**kw)
-    if name == "satin-ward":
-        from kesbrdf.references.ward import AnisotropicWard
-
-        # satin-like: narrow across the warp floats' highlight direction, long along it
-        kw = {"alpha_x": 0.08, "alpha_y": 0.22, "rho_d": [0.02, 0.02, 0.02], "rho_s": 0.12, **extra}
-        return AnisotropicWard(**kw)
-    if name == "isotropic":
-        from kesbrdf.references.ward import AnisotropicWard
-
-        kw = {"alpha_x": 0.2, "alpha_y": 0.2, "rho_d": [0.3, 0.3, 0.3], "rho_s": 0.1, **extra}
-        return AnisotropicWard(**kw)
-    if name == "ashikhmin-shirley":
-        from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
-
-        kw = {"n_u": 50.0, "n_v": 400.0, "R_s": 0.1, "R_d": [0.3, 0.25, 0.2], **extra}
-        return AshikhminShirley(**kw)
-    if name in ("sadeghi-satin", "sadeghi-black-satin"):
-        from kesbrdf.references import sadeghi2013
-
-        if name == "sadeghi-black-satin":
-            return sadeghi2013.black_satin(**extra)
-        return sadeghi2013.Sadeghi2013(preset="satin", **extra)
-    raise RuntimeError(f"reference {name!r} is listed in REFERENCES but has no constructor")
+from kesbrdf.errors import KesbrdfError
+# The one registry of reference BRDFs lives in the library; the CLI re-exports it.
+from kesbrdf.references.registry import REFERENCES, make_reference  # noqa: F401 (re-exported)
 
 
 def stderr(text: str) -> None:

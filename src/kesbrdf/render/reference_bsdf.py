@@ -47,8 +47,6 @@ from __future__ import annotations
 
 import json
 import math
-import os
-from pathlib import Path
 
 import numpy as np
 
@@ -56,6 +54,7 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.references.registry import REFERENCES, RGL_FILES, make_reference, rgl_path
 from kesbrdf.render import sampling as _sampling
 
 __all__ = [
@@ -68,66 +67,8 @@ __all__ = [
     "register",
 ]
 
-_SADEGHI_PRESETS = ("linen", "silk_crepe", "satin", "satin_back", "silk_shot", "velvet")
-#: RGL measured materials by name: file name under a search directory.
-RGL_FILES = {
-    "rgl-felt-white": "acrylic_felt_white_rgb.bsdf",
-    "rgl-felt-pink": "acrylic_felt_pink_rgb.bsdf",
-    "rgl-felt-purple": "acrylic_felt_purple_rgb.bsdf",
-}
-#: Where RGL files are looked for: ``$KESBRDF_RGL_DIR`` when set, the source tree's
-#: test data (white felt, CC0, shipped), then the project's data share (as
-#: benchmarks/bench_rgl.py).
-RGL_DIRS = tuple(
-    Path(p)
-    for p in (
-        os.environ.get("KESBRDF_RGL_DIR", ""),
-        str(Path(__file__).resolve().parents[3] / "tests" / "data" / "rgl"),
-        "/work/shared/data/rgl",
-    )
-    if p
-)
-#: Every reference that can be rendered: the CLI's analytic ones, every Sadeghi preset,
-#: the virtual black satin, and the RGL felts.
-REFERENCE_NAMES = (
-    ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
-    + tuple(f"sadeghi-{p.replace('_', '-')}" for p in _SADEGHI_PRESETS if p != "satin")
-    + tuple(RGL_FILES)
-)
-
-
-def rgl_path(name: str) -> Path:
-    """The tensor file of an RGL reference name; KesbrdfError when it is not available."""
-    for d in RGL_DIRS:
-        p = d / RGL_FILES[name]
-        if p.is_file():
-            return p
-    raise KesbrdfError(
-        f"reference {name!r}: expected {RGL_FILES[name]} in {', '.join(str(d) for d in RGL_DIRS)}, found none"
-    )
-
-
-def make_reference(name: str, params=None):
-    """The numpy reference BRDF (callable ``f(wi, wr)``) of a name in :data:`REFERENCE_NAMES`.
-
-    ``params`` (dict or JSON text) overrides the defaults.  The CLI's names keep the
-    CLI's defaults (``kesbrdf simulate --reference``).
-    """
-    extra = json.loads(params) if isinstance(params, str) and params else dict(params or {})
-    if name not in REFERENCE_NAMES:
-        raise KesbrdfError(f"unknown reference {name!r}; expected one of {', '.join(REFERENCE_NAMES)}")
-    if name in RGL_FILES:
-        from kesbrdf.references.rgl import RGLMeasured
-
-        return RGLMeasured(rgl_path(name), parameterised_by=extra.get("parameterised_by", "viewer"))
-    if name.startswith("sadeghi-") and name not in ("sadeghi-satin", "sadeghi-black-satin"):
-        from kesbrdf.references.sadeghi2013 import Sadeghi2013
-
-        return Sadeghi2013(preset=name[len("sadeghi-"):].replace("-", "_"), **extra)
-    # one registry of defaults for the CLI's names (kesbrdf simulate uses the same)
-    from kesbrdf.cli._common import make_reference as _cli_reference
-
-    return _cli_reference(name, json.dumps(extra) if extra else None)
+#: Every reference that can be rendered: all of :data:`kesbrdf.references.registry.REFERENCES`.
+REFERENCE_NAMES = REFERENCES
 
 
 # -----------------------------------------------------------------------------------

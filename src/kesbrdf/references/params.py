@@ -1,6 +1,6 @@
-"""``simulate --params``: a JSON object checked against the reference's parameters.
+"""Reference parameters given as JSON (``simulate --params``), checked before building.
 
-Each reference of :data:`kesbrdf.cli._common.REFERENCES` declares the parameters a
+Each reference of :data:`kesbrdf.references.registry.REFERENCES` declares the parameters a
 user may set, with their type and range (:data:`PARAMETERS`).  Unknown names, wrong
 JSON types, non-finite numbers and out-of-range values are refused with one line
 naming the parameter, the expected type/range and what arrived, before any
@@ -54,6 +54,9 @@ PARAMETERS: dict[str, dict[str, tuple]] = {
     },
     "sadeghi-satin": _SADEGHI,
     "sadeghi-black-satin": {**_SADEGHI, "dye_factor": _number(0.0, 1.0)},
+    **{f"sadeghi-{p}": _SADEGHI for p in ("linen", "silk-crepe", "satin-back", "silk-shot", "velvet")},
+    **{f"rgl-felt-{c}": {"parameterised_by": ("choice", ("light", "viewer"), None, False)}
+       for c in ("white", "pink", "purple")},
 }
 
 

@@ -1,0 +1,121 @@
+"""The one registry of reference BRDFs: names, defaults and constructors.
+
+Every part of kesbrdf that builds a reference by name (``kesbrdf simulate``, ``plot``,
+``report``, ``plan``, the reference-vs-model renders, the benchmarks) goes through
+:func:`make_reference`, so a name means the same BRDF everywhere.
+
+Names
+-----
+``ward``, ``satin-ward``, ``isotropic``
+    Anisotropic Ward (:mod:`kesbrdf.references.ward`) with the defaults below.
+``ashikhmin-shirley``
+    :mod:`kesbrdf.references.ashikhmin_shirley`.
+``sadeghi-<preset>``
+    Sadeghi et al. 2013 microcylinder presets (Table II), and ``sadeghi-black-satin``,
+    the embedded demo fabric (:func:`kesbrdf.references.sadeghi2013.black_satin`).
+``rgl-felt-<colour>``
+    RGL-EPFL measured felts read through Mitsuba's ``measured`` plugin; the white felt
+    ships with the tests (CC0), the others are found through ``$KESBRDF_RGL_DIR``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+from kesbrdf.errors import KesbrdfError, validate_choice
+from kesbrdf.references.params import parse_params
+
+__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "RGL_FILES", "RGL_DIRS", "make_reference", "rgl_path"]
+
+_SADEGHI_PRESETS = ("linen", "silk_crepe", "satin", "satin_back", "silk_shot", "velvet")
+
+#: RGL measured materials by name: file name under a search directory.
+RGL_FILES = {
+    "rgl-felt-white": "acrylic_felt_white_rgb.bsdf",
+    "rgl-felt-pink": "acrylic_felt_pink_rgb.bsdf",
+    "rgl-felt-purple": "acrylic_felt_purple_rgb.bsdf",
+}
+#: Where RGL files are looked for: ``$KESBRDF_RGL_DIR`` when set, then the source
+#: tree's test data (white felt, CC0, shipped).
+RGL_DIRS = tuple(
+    Path(p)
+    for p in (os.environ.get("KESBRDF_RGL_DIR", ""), str(Path(__file__).resolve().parents[3] / "tests" / "data" / "rgl"))
+    if p
+)
+
+#: References that need no data file and no renderer (numpy only).
+ANALYTIC_REFERENCES = (
+    ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
+    + tuple(f"sadeghi-{p.replace('_', '-')}" for p in _SADEGHI_PRESETS if p != "satin")
+)
+#: Every reference name, in the order the CLI lists them.
+REFERENCES = ANALYTIC_REFERENCES + tuple(RGL_FILES)
+
+
+def rgl_path(name: str) -> Path:
+    """The tensor file of an RGL reference name; KesbrdfError when it is not available."""
+    for d in RGL_DIRS:
+        p = d / RGL_FILES[name]
+        if p.is_file():
+            return p
+    raise KesbrdfError(
+        f"reference {name!r}: expected {RGL_FILES[name]} in {', '.join(str(d) for d in RGL_DIRS)} "
+        "(set KESBRDF_RGL_DIR), found none"
+    )
+
+
+def make_reference(name: str, params=None, flag: str = "--params"):
+    """Build the reference BRDF ``name`` (callable ``f(wi, wr) -> (..., C)``).
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`REFERENCES`; anything else is a one-line error listing them.
+    params : dict, JSON text or None
+        Overrides of the defaults, checked against the reference's parameters
+        (:mod:`kesbrdf.references.params`).
+    flag : str
+        The option the parameters came from, for error messages.
+    """
+    validate_choice("reference", name, REFERENCES)
+    if isinstance(params, dict):
+        params = json.dumps(params) if params else None
+    extra = parse_params(name, params, flag)
+    try:
+        return _build(name, extra)
+    except KesbrdfError:
+        raise
+    except (TypeError, ValueError) as exc:  # a combination the per-parameter checks cannot see
+        raise KesbrdfError(f"{flag} for reference {name}: {' '.join(str(exc).split())}") from None
+
+
+def _build(name: str, extra: dict):
+    if name in ("ward", "satin-ward", "isotropic"):
+        from kesbrdf.references.ward import AnisotropicWard
+
+        defaults = {
+            "ward": {"alpha_x": 0.12, "alpha_y": 0.3, "rho_d": [0.25, 0.2, 0.15], "rho_s": 0.15},
+            # satin-like: narrow across the warp floats' highlight direction, long along it
+            "satin-ward": {"alpha_x": 0.08, "alpha_y": 0.22, "rho_d": [0.02, 0.02, 0.02], "rho_s": 0.12},
+            "isotropic": {"alpha_x": 0.2, "alpha_y": 0.2, "rho_d": [0.3, 0.3, 0.3], "rho_s": 0.1},
+        }[name]
+        return AnisotropicWard(**{**defaults, **extra})
+    if name == "ashikhmin-shirley":
+        from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
+
+        return AshikhminShirley(**{"n_u": 50.0, "n_v": 400.0, "R_s": 0.1, "R_d": [0.3, 0.25, 0.2], **extra})
+    if name == "sadeghi-black-satin":
+        from kesbrdf.references import sadeghi2013
+
+        return sadeghi2013.black_satin(**extra)
+    if name.startswith("sadeghi-"):
+        from kesbrdf.references.sadeghi2013 import Sadeghi2013
+
+        return Sadeghi2013(preset=name[len("sadeghi-"):].replace("-", "_"), **extra)
+    if name in RGL_FILES:
+        from kesbrdf.references.rgl import RGLMeasured
+
+        return RGLMeasured(rgl_path(name), parameterised_by=extra.get("parameterised_by", "viewer"))
+    raise RuntimeError(f"reference {name!r} is listed in REFERENCES but has no constructor")
