@@ -52,6 +52,7 @@ __all__ = ["ReflectanceModel", "register", "kind_class", "known_kinds", "KIND_MO
 KIND_MODULES: dict[str, str] = {
     "kes": "kesbrdf.model",
     "kes-halfdiff": "kesbrdf.halfdiff",
+    "fibre-prior": "kesbrdf.prior_model",
 }
 
 _REGISTRY: dict[str, type] = {}

@@ -1,0 +1,243 @@
+r"""Model kind ``fibre-prior``: the woven-cloth prior times a KES-interpolated residual.
+
+.. math::
+
+    f_r(\omega_i,\omega_r) = f_\text{prior}(\omega_i,\omega_r)\cdot r(\omega_i,\omega_r)^{\tau(\gamma)}
+
+* :math:`f_\text{prior}` is :class:`kesbrdf.prior.FibrePrior`, fitted to all usable rows;
+* the residual ratio :math:`r = y / f_\text{prior}` is taken on the in-plane samples of
+  the KES incidence line (θ_i + θ_r = 90° in the paper protocol) and interpolated over
+  the deviation azimuth φ with the whole-circle extended KES form and linearly over γ,
+  by the same code as the ``kes`` kind (:func:`kesbrdf.model.fit` on the ratio, read
+  back with :func:`kesbrdf.brdf.lookup` and divided by the line weight
+  √((cos γ + cos S)/2), which the KES table carries);
+* τ(γ) = 1 inside the measured γ range and falls smoothly (smoothstep) to 0 over
+  :data:`RELAX_DEG` beyond it, so the residual relaxes to 1 where nothing was measured.
+
+With ``residual=False`` the model is the pure prior.  Every measured sample on the
+KES line with y above the noise floor is reproduced to round-off (the ratio is
+multiplied back exactly there).  Samples with y ≤ 0 cannot be reproduced by a
+positive model: they are floored at ε = 10⁻⁴·max y before the ratio is taken.
+
+:func:`loo_compare` runs leave-one-orientation-out validation of this kind against
+``kes`` on the user's own data, for ``kind="auto"`` to use.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from kesbrdf.brdf import lookup, to_phi_gamma
+from kesbrdf.errors import MeasurementError, ModelError
+from kesbrdf.kinds import ReflectanceModel, register
+from kesbrdf.measurement import Measurement
+from kesbrdf.prior import FibrePrior, fit_prior
+
+__all__ = ["FibrePriorModel", "loo_compare", "RELAX_DEG"]
+
+#: Width of the relaxation of the residual toward 1 beyond the measured γ range.
+RELAX_DEG = 15.0
+#: Relative floor of the measured values before the ratio is taken.
+RATIO_FLOOR = 1e-4
+_FIT_OPTIONS = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
+
+
+def _line_weight(gamma, line_sum):
+    return np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2.0, 1e-300, None))
+
+
+@register
+class FibrePriorModel(ReflectanceModel):
+    """The fibre prior with an optional KES residual (module docstring)."""
+
+    kind = "fibre-prior"
+    mappings = ("deviation",)
+
+    def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
+                 diagnostics=None, input_info=None):
+        self.prior = prior
+        self.residual = residual  # SimpleNamespace(phi_grid, gamma_grid, table, line_sum, gamma_max) or None
+        self.channels = tuple(channels)
+        self.parameters = dict(parameters or {})
+        self.diagnostics = dict(diagnostics or {})
+        self.input_info = dict(input_info or {})
+
+    # -- evaluation ---------------------------------------------------------------
+    def residual_ratio(self, wi, wr) -> np.ndarray:
+        """r(ωi, ωr)^τ(γ), shape (..., C); 1 everywhere for a pure prior."""
+        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+        if self.residual is None:
+            return np.ones(wi.shape[:-1] + (self.n_channels,))
+        res = self.residual
+        phi, gamma = to_phi_gamma(wi, wr, "deviation")
+        g_in = np.minimum(gamma, res.gamma_max)
+        q = lookup(res, phi, g_in)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = q / _line_weight(g_in, res.line_sum)[..., None]
+        x = np.clip((gamma - res.gamma_max) / math.radians(RELAX_DEG), 0.0, 1.0)
+        tau = 1.0 - x * x * (3.0 - 2.0 * x)
+        return np.exp(tau[..., None] * np.log(np.maximum(r, 1e-300)))
+
+    def evaluate(self, wi, wr, mapping=None) -> np.ndarray:
+        self.check_mapping(mapping)
+        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+        f = self.prior(wi, wr)
+        if self.residual is not None:
+            f = f * self.residual_ratio(wi, wr)
+        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
+        f = np.where(above[..., None] & np.isfinite(f), f, 0.0)
+        nan = np.isnan(wi).any(-1) | np.isnan(wr).any(-1)
+        return np.where(nan[..., None], np.nan, f)
+
+    __call__ = evaluate
+
+    # -- files --------------------------------------------------------------------
+    def to_payload(self):
+        fields = {"prior": self.prior.to_dict(), "has_residual": self.residual is not None}
+        arrays = {}
+        if self.residual is not None:
+            fields["residual"] = {"line_sum": float(self.residual.line_sum), "gamma_max": float(self.residual.gamma_max)}
+            arrays = {"residual_phi_grid": self.residual.phi_grid, "residual_gamma_grid": self.residual.gamma_grid,
+                      "residual_table": self.residual.table}
+        return fields, arrays
+
+    @classmethod
+    def from_payload(cls, fields, arrays, shared, source=None):
+        try:
+            prior = FibrePrior.from_dict(fields["prior"])
+            residual = None
+            if fields.get("has_residual"):
+                table = np.asarray(arrays["residual_table"], float)
+                phi, gamma = np.asarray(arrays["residual_phi_grid"]), np.asarray(arrays["residual_gamma_grid"])
+                if table.shape[:2] != (phi.size, gamma.size):
+                    raise ModelError(f"{source or 'model'}: residual table shape {table.shape} does not match grids ({phi.size}, {gamma.size})")
+                residual = SimpleNamespace(phi_grid=phi, gamma_grid=gamma, table=table,
+                                           line_sum=float(fields["residual"]["line_sum"]),
+                                           gamma_max=float(fields["residual"]["gamma_max"]))
+        except (KeyError, TypeError, MeasurementError) as exc:
+            raise ModelError(f"{source or 'model'}: bad fibre-prior payload ({exc})") from None
+        return cls(prior, residual, channels=shared.get("channels", ("value",)), parameters=shared.get("parameters"),
+                   diagnostics=shared.get("diagnostics"), input_info=shared.get("input_info"))
+
+    # -- fitting ------------------------------------------------------------------
+    @classmethod
+    def usable_rows(cls, measurement):
+        m = measurement
+        ok = (m.theta_i < np.pi / 2) & (m.theta_r < np.pi / 2) & np.all(np.isfinite(m.values), axis=1)
+        return ok, "needs finite values with both directions above the horizon"
+
+    @classmethod
+    def fit_measurement(cls, measurement, **options):
+        unknown = sorted(set(options) - set(_FIT_OPTIONS))
+        if unknown:
+            raise ModelError(f"fibre-prior fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(_FIT_OPTIONS)}")
+        residual_opt = options.pop("residual", "auto")
+        m = measurement
+        rows, _ = cls.usable_rows(m)
+        prior = fit_prior(m, rows=rows, **options)
+        residual, note = None, "residual off"
+        if residual_opt:
+            try:
+                residual, note = _fit_residual(prior, m.subset(rows)), "KES residual on the incidence line"
+            except MeasurementError as exc:
+                if residual_opt is True:
+                    raise
+                note = f"no residual: {exc}"
+        return cls(prior, residual, channels=m.channels,
+                   parameters={"residual": residual is not None, "prior": prior.report.get("chosen"),
+                               "theta_d_law": f"Fresnel eta={1.5} normalised at 45 deg"
+                               + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else "")},
+                   diagnostics={"fit": prior.report, "residual": note}, input_info=m.input_info())
+
+
+def _ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
+    """In-plane rows of ``m`` with values y / f_prior (y floored at ε = RATIO_FLOOR·max y)."""
+    if not np.any(m.is_in_plane):
+        raise MeasurementError("the residual needs in-plane samples at psi = 0, 45, 90 deg; got none")
+    inp = m.subset(m.is_in_plane)
+    y = inp.values
+    eps = RATIO_FLOOR * np.max(np.abs(y), axis=0)
+    ratio = np.maximum(y, eps) / np.maximum(prior(inp.wi, inp.wr), 1e-300)
+    return Measurement.in_plane(inp.psi, inp.theta_i, inp.theta_r, ratio, channels=inp.channels)
+
+
+def _ratio_table(rm: Measurement):
+    """KES table of a ratio measurement (module docstring)."""
+    from kesbrdf.model import fit as kes_fit
+
+    km = kes_fit(rm, body="none", fallback="log", noise_floor=1e-12)
+    line_sum = math.radians(km.diagnostics["incidence_line_deg"])
+    return SimpleNamespace(phi_grid=km.phi_grid, gamma_grid=km.gamma_grid, table=km.table,
+                           line_sum=line_sum, gamma_max=float(km.gamma_grid[-1]))
+
+
+def _fit_residual(prior: FibrePrior, m: Measurement):
+    """The residual of ``prior`` on ``m``; raises MeasurementError without KES orientations."""
+    return _ratio_table(_ratio_measurement(prior, m))
+
+
+def _nrmse(pred, truth):
+    return float(np.sqrt(np.mean((pred - truth) ** 2)) / max(float(np.mean(np.abs(truth))), 1e-300))
+
+
+def loo_compare(measurement, **fit_options) -> dict:
+    """Leave-one-orientation-out NRMSE of ``fibre-prior`` (with and without residual) and ``kes``.
+
+    Each measured orientation is predicted from the others.  ``kes`` can predict only a
+    bias (it needs warp and weft; :func:`kesbrdf.validation.leave_one_orientation_out`);
+    the pure prior predicts every orientation; prior + residual is reported for the
+    biases, with the residual built from the remaining orientations exactly as ``kes``
+    builds its table (the other bias mirrored, y → −y).
+
+    Returns
+    -------
+    dict
+        ``{"orientations": {psi_deg: {candidate: nrmse}}, "median": {candidate: median over
+        the biases}, "best": candidate with the lowest median on the biases}``.
+    """
+    from kesbrdf.validation import _mirror_135_to_45, leave_one_orientation_out
+
+    m = measurement
+    psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
+    kes_loo = leave_one_orientation_out(m, fallback="log")
+    table = {}
+    for held in (0.0, 45.0, 90.0, 135.0):
+        test_rows = np.abs(psi_deg - held) < 0.5
+        if not test_rows.any():
+            continue
+        test = m.subset(test_rows)
+        train = m.subset(~test_rows & np.isfinite(psi_deg))
+        prior = fit_prior(train, **fit_options)
+        row = {"prior": _nrmse(prior(test.wi, test.wr), test.values)}
+        entry = kes_loo.get(f"{held:g}", {})
+        if entry.get("possible"):
+            row["kes"] = entry["metrics"]["all"]["nrmse"]
+            other = 135.0 if held == 45.0 else 45.0
+            ratio_m = _ratio_measurement(prior, train)
+            rpsi = np.degrees(ratio_m.psi)
+            keep = (np.abs(rpsi - 0) < 0.5) | (np.abs(rpsi - 90) < 0.5)
+            other_rows = np.abs(rpsi - other) < 0.5
+            base = ratio_m.subset(keep)
+            bias = _mirror_135_to_45(ratio_m, other_rows) if held == 45.0 else ratio_m.subset(other_rows)
+            rtrain = Measurement.in_plane(np.concatenate([base.psi, bias.psi]), np.concatenate([base.theta_i, bias.theta_i]),
+                                          np.concatenate([base.theta_r, bias.theta_r]), np.concatenate([base.values, bias.values]),
+                                          channels=m.channels)
+            model = FibrePriorModel(prior, _ratio_table(rtrain), channels=m.channels)
+            if held == 135.0:
+                pred = model.evaluate(test.wi, test.wr)
+            else:  # the residual was built in the mirrored frame; the prior was not
+                flip = np.array([1.0, -1.0, 1.0])
+                ratio = model.residual_ratio(test.wr * flip, test.wi * flip)
+                pred = prior(test.wi, test.wr) * ratio
+            row["prior+residual"] = _nrmse(pred, test.values)
+        table[f"{held:g}"] = row
+    cands = ("kes", "prior", "prior+residual")
+    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in cands
+              if any(c in r and k in ("45", "135") for k, r in table.items())}
+    bias_median = {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
+                   for c in cands if any(k in table and c in table[k] for k in ("45", "135"))}
+    best = min(bias_median, key=bias_median.get) if bias_median else None
+    return {"orientations": table, "median": median, "median_biases": bias_median, "best": best}
