@@ -195,8 +195,11 @@ _U_NODES = (np.arange(N_U) + 0.5) * (2 * U_RANGE / N_U) - U_RANGE
 _DU = 2 * U_RANGE / N_U
 
 
-def _filament(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, lo, hi, log_s, c2, rho):
-    """S of a filament family; geometry (b, N), parameters (B, 1) → (B, N)."""
+def _filament_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):
+    """Parameter-free part of a filament family: (u*, cos φ, G0), each (K, N).
+
+    S = P(u*) N(φ) G0 with G0 = Ā / (|ωi+ωr| √(1 − h'_x²)).
+    """
     u = np.arctan2(hy, hz)
     su, cu = np.sin(u), np.cos(u)
     sv, cv = np.sin(_V_NODES), np.cos(_V_NODES)
@@ -205,7 +208,7 @@ def _filament(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, lo, hi, log_s, c2, r
     A_bar = _seeliger(ci, cr).mean(axis=-1)
     cphi = _cos_phi(ix, iy, iz, rx, ry, rz, 0.0, cu, -su)
     jac = np.sqrt(np.maximum(1.0 - hx * hx, 1e-12))
-    return _profile(u, lo, hi, log_s, c2) * _lobe_rho(cphi, rho) * A_bar / (norm_sum * jac)
+    return u, cphi, A_bar / (norm_sum * jac)
 
 
 def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
@@ -247,41 +250,66 @@ def _staple_combine(G, cphi, lo, hi, log_s, c2, rho):
     return np.sum(P * _lobe_rho(cphi, e(rho)) * G, axis=-1) * _DU
 
 
-def evaluate_batch(spec: PriorSpec, theta, wi, wr) -> np.ndarray:
+def _cached(cache, key, compute):
+    if cache is None:
+        return compute()
+    if key not in cache:
+        if len(cache) > 256:
+            cache.clear()
+        cache[key] = compute()
+    return cache[key]
+
+
+def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) -> np.ndarray:
     """f_r for a batch of parameter vectors: theta (B, P), wi/wr (N, 3) → (B, N, C).
 
-    Directions must be above the horizon (callers mask the others).
+    Directions must be above the horizon (callers mask the others).  ``cache`` (a dict
+    owned by the caller, for one fixed (wi, wr)) keeps the parameter-free geometry of
+    each family per axis offset (and twist, for staple families) between calls.
     """
     theta = np.atleast_2d(np.asarray(theta, float))
     idx = spec.index()
     C = spec.n_channels
+    B = theta.shape[0]
     col = lambda name: theta[:, idx[name]][:, None]  # noqa: E731  (B, 1)
-    s = wi + wr
-    norm_sum = np.linalg.norm(s, axis=-1)
-    h = s / np.maximum(norm_sum, 1e-300)[:, None]
-    cos_d = np.sum(wi * h, axis=-1)
-    Phi = fresnel_dielectric(cos_d) / _F45  # (N,)
-    Phi = np.broadcast_to(Phi, (1, Phi.size))
+
+    def base():
+        s = wi + wr
+        norm_sum = np.linalg.norm(s, axis=-1)
+        h = s / np.maximum(norm_sum, 1e-300)[:, None]
+        Phi = fresnel_dielectric(np.sum(wi * h, axis=-1)) / _F45
+        return norm_sum, h, Phi, np.sum(wi * wr, axis=-1)
+
+    norm_sum, h, Phi, x = _cached(cache, "base", base)
+    Phi = Phi[None, :]
     if spec.free_theta_d:
-        x = np.sum(wi * wr, axis=-1)[None, :]
-        Phi = Phi * np.exp(np.clip(col("d1") * x + col("d2") * x * x, -50, 50))
-    offset = col("axis_offset") if spec.free_axes else 0.0
+        Phi = Phi * np.exp(np.clip(col("d1") * x[None] + col("d2") * x[None] ** 2, -50, 50))
+    offset = col("axis_offset")[:, 0] if spec.free_axes else np.zeros(B)
     f = np.exp(theta[:, [idx[f"log_kd_{c}"] for c in range(C)]])[:, None, :] + 0.0 * norm_sum[None, :, None]
+
+    def frames(a):
+        return (*_family_frame(h, a), *_family_frame(wi, a), *_family_frame(wr, a))
+
     for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, np.pi / 2)):
         shape_params = (col(f"{fam}_u_lo"), col(f"{fam}_u_hi"), col(f"{fam}_log_s"), col(f"{fam}_c2"), col(f"{fam}_rho"))
+        lo, hi, log_s, c2, rho = shape_params
         if kind == "filament":
-            a = alpha + offset
-            geo = (*_family_frame(h[None], a), *_family_frame(wi[None], a), *_family_frame(wr[None], a))
-            S = _filament(*geo, norm_sum[None, :], *shape_params)
+            uniq, inv = np.unique(offset, return_inverse=True)
+            parts = [_cached(cache, ("fil", fam, float(o)), lambda o=o: _filament_geometry(*frames(alpha + o), norm_sum))
+                     for o in uniq]
+            u, cphi, G0 = (np.stack([p[k] for p in parts])[np.asarray(inv).reshape(-1)] for k in range(3))
+            S = _profile(u, lo, hi, log_s, c2) * _lobe_rho(cphi, rho) * G0
         else:
             # the expensive geometry depends only on (δ, ψ): evaluate it once per distinct pair
-            key = np.column_stack([np.broadcast_to(offset, (theta.shape[0], 1))[:, 0], col(f"{fam}_psi")[:, 0]])
+            key = np.column_stack([offset, col(f"{fam}_psi")[:, 0]])
             uniq, inv = np.unique(key, axis=0, return_inverse=True)
+            parts = [_cached(cache, ("sta", fam, float(o), float(p)),
+                             lambda o=o, p=p: _staple_geometry(*(q[None] for q in frames(alpha + o)), norm_sum[None], np.array([[p]])))
+                     for o, p in uniq]
             inv = np.asarray(inv).reshape(-1)
-            a = alpha + uniq[:, :1]
-            geo = (*_family_frame(h[None], a), *_family_frame(wi[None], a), *_family_frame(wr[None], a))
-            G, cphi = _staple_geometry(*geo, norm_sum[None, :], uniq[:, 1:2])
-            S = _staple_combine(G[inv], cphi[inv], *shape_params)
+            G = np.concatenate([q[0] for q in parts])[inv]
+            cphi = np.concatenate([q[1] for q in parts])[inv]
+            S = _staple_combine(G, cphi, *shape_params)
         ks = np.exp(theta[:, [idx[f"{fam}_log_ks_{c}"] for c in range(C)]])  # (B, C)
         f = f + (Phi * S)[..., None] * ks[:, None, :]
     return f
@@ -339,6 +367,7 @@ class _Data:
     eps: np.ndarray      # (C,)
     sigma: np.ndarray    # (N, C) of the log residual
     has_sigma: bool
+    cache: dict = field(default_factory=dict)
 
 
 def _prepare(m, rows=None) -> _Data:
@@ -363,7 +392,7 @@ def _prepare(m, rows=None) -> _Data:
 
 
 def _residuals_batch(spec, thetas, d: _Data):
-    f = evaluate_batch(spec, thetas, d.wi, d.wr)
+    f = evaluate_batch(spec, thetas, d.wi, d.wr, d.cache)
     f = np.where(np.isfinite(f), f, 0.0)
     r = (np.log(np.maximum(f, 0) + d.eps) - np.log(np.maximum(d.y, 0) + d.eps)) / d.sigma
     return r.reshape(r.shape[0], -1)
@@ -426,7 +455,7 @@ def _start(spec: PriorSpec, d: _Data, u_half, rho, psi=(0.0, 0.0), offset=0.0, g
 
 def _scale_ks_start(spec, x, d):
     """Rescale the k_s of a start so the model's peak matches the data's (a cheap first guess)."""
-    f = evaluate_batch(spec, x[None], d.wi, d.wr)[0]
+    f = evaluate_batch(spec, x[None], d.wi, d.wr, d.cache)[0]
     idx = spec.index()
     kd = np.exp(x[[idx[f"log_kd_{c}"] for c in range(spec.n_channels)]])
     spec_part = np.maximum(f - kd, 1e-300)
@@ -478,7 +507,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     if kinds == "auto":
         variants += [("filament", "staple"), ("staple", "filament"), ("staple", "staple")]
     ds = _subsample(d, MULTISTART_MAX_ROWS)
-    offsets = np.radians([0.0, 45.0, 90.0, 135.0]) if free_axes else [0.0]
+    offsets = np.radians([0.0, 60.0, 120.0]) if free_axes else [0.0]
     n_start = START_NFEV
     report = {"variants": {}, "n": int(d.y.size), "criterion": "BIC = chi2 + k ln n" if d.has_sigma else "BIC = n ln(RSS/n) + k ln n"}
     best_geometry = None
@@ -488,7 +517,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
         if kv == ("filament", "filament"):
             starts = [(uh, rho, (0, 0), off) for uh in (6.0, 20.0, 45.0) for rho in (0.0, 0.6) for off in offsets]
             if free_axes:
-                starts = [(uh, rho, (0, 0), off) for uh in (6.0, 30.0) for rho in (0.0, 0.6) for off in offsets]
+                starts = [(uh, 0.3, (0, 0), off) for uh in (6.0, 30.0) for off in offsets]
         else:
             twists = (20.0, -20.0, 40.0, -40.0)
             starts = [(None, None, tuple(t if k == "staple" else 0 for k in kv), None) for t in twists]
