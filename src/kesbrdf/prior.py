@@ -322,6 +322,8 @@ class FibrePrior:
     spec: PriorSpec
     theta: np.ndarray
     report: dict = field(default_factory=dict)
+    #: Laplace covariance of ``theta`` (P, P) from the fit, or None (see :func:`fit_prior`).
+    cov: np.ndarray | None = None
 
     def parameters(self) -> dict:
         return dict(zip(self.spec.names(), map(float, self.theta)))
@@ -346,7 +348,17 @@ class FibrePrior:
     def to_dict(self) -> dict:
         return {"kinds": list(self.spec.kinds), "n_channels": self.spec.n_channels,
                 "free_axes": self.spec.free_axes, "free_theta_d": self.spec.free_theta_d,
-                "theta": dict(zip(self.spec.names(), map(float, self.theta)))}
+                "theta": dict(zip(self.spec.names(), map(float, self.theta))),
+                "cov": None if self.cov is None else np.asarray(self.cov).tolist()}
+
+    def log_jacobian(self, wi, wr) -> np.ndarray:
+        """d ln f / d theta at (wi, wr) (N, 3) by one batched forward difference, shape (N, C, P)."""
+        x = self.theta
+        step = 1e-6 * np.maximum(1.0, np.abs(x))
+        X = np.vstack([x[None], x[None] + np.diag(step)])
+        f = evaluate_batch(self.spec, X, np.asarray(wi, float).reshape(-1, 3), np.asarray(wr, float).reshape(-1, 3))
+        lf = np.log(np.maximum(f, 1e-300))
+        return np.moveaxis((lf[1:] - lf[0]) / step[:, None, None], 0, -1)
 
     @classmethod
     def from_dict(cls, d: dict) -> "FibrePrior":
@@ -355,7 +367,9 @@ class FibrePrior:
         missing = [n for n in names if n not in d["theta"]]
         if missing:
             raise MeasurementError(f"fibre prior parameters missing {', '.join(missing)}")
-        return cls(spec, np.array([d["theta"][n] for n in names], float))
+        cov = d.get("cov")
+        return cls(spec, np.array([d["theta"][n] for n in names], float),
+                   cov=None if cov is None else np.asarray(cov, float))
 
 
 # ---------------------------------------------------------------------------------- fit
@@ -545,8 +559,26 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
         if kv == ("filament", "filament"):
             best_geometry = dict(zip(spec.names(), res.x))
     bic, spec, x = min(results, key=lambda r: r[0])
+    cov = _laplace_covariance(spec, np.asarray(x, float), d)
     report["chosen"] = "/".join(spec.kinds)
     report["seconds"] = time.perf_counter() - t0
     report["free_axes"] = bool(free_axes)
     report["free_theta_d"] = bool(free_theta_d)
-    return FibrePrior(spec, np.asarray(x, float), report)
+    return FibrePrior(spec, np.asarray(x, float), report, cov)
+
+
+def _laplace_covariance(spec, x, d: _Data) -> np.ndarray:
+    """Laplace covariance s²·(JᵀJ)⁺ of the weighted log residuals at the optimum.
+
+    s² = 1 when the measurement carried uncertainties (the residuals are already in
+    units of σ), else RSS/(n − k).  Directions the data does not constrain get the
+    pseudo-inverse's zero: their uncertainty is carried by the model term of
+    :func:`kesbrdf.prior_model.predict_with_uncertainty`, not here.
+    """
+    r0 = _residuals_batch(spec, x[None], d)[0]
+    step = 1e-6 * np.maximum(1.0, np.abs(x))
+    R = _residuals_batch(spec, np.vstack([x[None], x[None] + np.diag(step)]), d)
+    J = ((R[1:] - R[0]) / step[:, None]).T
+    n, k = J.shape
+    s2 = 1.0 if d.has_sigma else float(np.sum(r0**2)) / max(n - k, 1)
+    return s2 * np.linalg.pinv(J.T @ J, rcond=1e-10)
