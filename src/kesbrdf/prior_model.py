@@ -72,6 +72,14 @@ class FibrePriorModel(ReflectanceModel):
         if self.residual is None:
             return np.ones(wi.shape[:-1] + (self.n_channels,))
         res = self.residual
+        if getattr(res, "mode", "line") == "halfdiff":
+            from kesbrdf.halfdiff import lookup_halfdiff, to_half_diff
+
+            phi_h, theta_h, theta_d = to_half_diff(wi, wr)
+            r = lookup_halfdiff(res, phi_h, theta_h, theta_d)
+            x = np.clip((theta_h - res.theta_h_max) / math.radians(RELAX_DEG), 0.0, 1.0)
+            tau = 1.0 - x * x * (3.0 - 2.0 * x)
+            return np.exp(tau[..., None] * np.log(np.maximum(r, 1e-300)))
         phi, gamma = to_phi_gamma(wi, wr, "deviation")
         g_in = np.minimum(gamma, res.gamma_max)
         q = lookup(res, phi, g_in)
@@ -98,10 +106,15 @@ class FibrePriorModel(ReflectanceModel):
     def to_payload(self):
         fields = {"prior": self.prior.to_dict(), "has_residual": self.residual is not None}
         arrays = {}
-        if self.residual is not None:
-            fields["residual"] = {"line_sum": float(self.residual.line_sum), "gamma_max": float(self.residual.gamma_max)}
-            arrays = {"residual_phi_grid": self.residual.phi_grid, "residual_gamma_grid": self.residual.gamma_grid,
-                      "residual_table": self.residual.table}
+        res = self.residual
+        if res is not None and getattr(res, "mode", "line") == "halfdiff":
+            fields["residual"] = {"mode": "halfdiff", "theta_h_max": float(res.theta_h_max)}
+            arrays = {"residual_phi_grid": res.phi_grid, "residual_theta_h_grid": res.theta_h_grid,
+                      "residual_theta_d_grid": res.theta_d_grid, "residual_table": res.table}
+        elif res is not None:
+            fields["residual"] = {"mode": "line", "line_sum": float(res.line_sum), "gamma_max": float(res.gamma_max)}
+            arrays = {"residual_phi_grid": res.phi_grid, "residual_gamma_grid": res.gamma_grid,
+                      "residual_table": res.table}
         return fields, arrays
 
     @classmethod
@@ -109,7 +122,14 @@ class FibrePriorModel(ReflectanceModel):
         try:
             prior = FibrePrior.from_dict(fields["prior"])
             residual = None
-            if fields.get("has_residual"):
+            if fields.get("has_residual") and fields["residual"].get("mode") == "halfdiff":
+                table = np.asarray(arrays["residual_table"], float)
+                grids = [np.asarray(arrays[f"residual_{k}_grid"], float) for k in ("phi", "theta_h", "theta_d")]
+                if table.shape[:3] != tuple(g.size for g in grids):
+                    raise ModelError(f"{source or 'model'}: residual table shape {table.shape} does not match its grids")
+                residual = SimpleNamespace(mode="halfdiff", phi_grid=grids[0], theta_h_grid=grids[1], theta_d_grid=grids[2],
+                                           table=table, theta_h_max=float(fields["residual"]["theta_h_max"]))
+            elif fields.get("has_residual"):
                 table = np.asarray(arrays["residual_table"], float)
                 phi, gamma = np.asarray(arrays["residual_phi_grid"]), np.asarray(arrays["residual_gamma_grid"])
                 if table.shape[:2] != (phi.size, gamma.size):
@@ -174,9 +194,32 @@ def _ratio_table(rm: Measurement):
                            line_sum=line_sum, gamma_max=float(km.gamma_grid[-1]))
 
 
+def _incidence_lines(m: Measurement) -> int:
+    """How many θ_i + θ_r lines hold at least 8 in-plane samples."""
+    total = np.round(np.degrees(m.theta_i + m.theta_r)[m.is_in_plane], 6)
+    _, counts = np.unique(total, return_counts=True)
+    return int(np.count_nonzero(counts >= 8))
+
+
+def _halfdiff_table(rm: Measurement):
+    """(φ_h, θ_h, θ_d) table of a ratio measurement with several incidence lines."""
+    from kesbrdf.halfdiff import fit_halfdiff, in_plane_half_diff
+
+    hd = fit_halfdiff(rm, body="none", fallback="log", noise_floor=1e-12, normalisation="none")
+    theta_h = in_plane_half_diff(rm.theta_i, rm.theta_r)[0]
+    return SimpleNamespace(mode="halfdiff", phi_grid=hd.phi_grid, theta_h_grid=hd.theta_h_grid,
+                           theta_d_grid=hd.theta_d_grid, table=hd.table, body=np.zeros(rm.n_channels),
+                           theta_h_max=float(np.max(theta_h)))
+
+
 def _fit_residual(prior: FibrePrior, m: Measurement):
-    """The residual of ``prior`` on ``m``; raises MeasurementError without KES orientations."""
-    return _ratio_table(_ratio_measurement(prior, m))
+    """The residual of ``prior`` on ``m``: the KES line table for one incidence line, the
+    (φ_h, θ_h, θ_d) table (:mod:`kesbrdf.halfdiff`) for several; raises
+    MeasurementError without KES orientations."""
+    rm = _ratio_measurement(prior, m)
+    if _incidence_lines(rm) > 1:
+        return _halfdiff_table(rm)
+    return _ratio_table(rm)
 
 
 def _nrmse(pred, truth):
