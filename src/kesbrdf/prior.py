@@ -415,7 +415,6 @@ def _residuals_batch(spec, thetas, d: _Data):
 def _solve(spec, x0, d: _Data, bounds, max_nfev):
     lo, hi = bounds
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
-    step = 1e-6 * np.maximum(1.0, np.abs(x0))
 
     def fun(x):
         return _residuals_batch(spec, x[None], d)[0]
@@ -427,7 +426,6 @@ def _solve(spec, x0, d: _Data, bounds, max_nfev):
         R = _residuals_batch(spec, X, d)
         return ((R[1:] - R[0]) / hstep[:, None]).T
 
-    del step
     # lsmr: the dense SVD of the default solver took 0.5 s per iteration for 2700 residuals
     # with threaded BLAS on a loaded 2-core machine; lsmr gives the same optimum 10x faster
     res = least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
