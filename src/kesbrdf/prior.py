@@ -138,7 +138,10 @@ class PriorSpec:
             elif n.endswith("log_s"):
                 a, b = math.log(math.radians(0.3)), math.log(math.radians(40))
             elif n.endswith("c2"):
-                a, b = -30.0, 30.0
+                # c₂ > 0 lets the profile grow toward |u| → 85° where the data may hold
+                # nothing (a fit to velvet reached c₂ = 30: 10³× too bright at the rim);
+                # capped so exp(c₂u²) ≤ e^4.4 anywhere
+                a, b = -30.0, 2.0
             elif n.endswith("rho"):
                 a, b = -0.95, 0.95
             elif n.endswith("psi"):
