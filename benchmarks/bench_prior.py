@@ -6,6 +6,10 @@ For every reference of every family, measured in the paper protocol (ψ = 0, 45,
 * ``held_out``: NRMSE (:func:`kesbrdf.validation.metrics`, "all" channels) at the
   held-out orientations ψ = 15 … 165° of :data:`kesbrdf.validation.HELD_OUT_DEG`, same
   protocol line;
+* ``*_within_1sigma`` / ``*_within_2sigma``: calibration of
+  :func:`kesbrdf.prior_model.predict_with_uncertainty` (candidates: the pure prior and
+  ``kes``) on the held-out orientations and the φ_i = 90° hemisphere (noise-free data,
+  so the fit term is ~0 and the bands are the model terms);
 * ``hemi90`` / ``hemi45``: NRMSE on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90°
   or 45°; viewer on the 2.5° grid of :func:`kesbrdf.validation.hemisphere_directions`);
 
@@ -50,7 +54,7 @@ from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
 from kesbrdf.gonio import measure  # noqa: E402
 from kesbrdf.model import fit as kes_fit  # noqa: E402
 from kesbrdf.prior import fit_prior  # noqa: E402
-from kesbrdf.prior_model import FibrePriorModel  # noqa: E402
+from kesbrdf.prior_model import FibrePriorModel, calibration  # noqa: E402
 from kesbrdf.validation import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics  # noqa: E402
 
 MODELS = ("kes", "prior", "prior_residual")
@@ -103,6 +107,8 @@ def evaluate_reference(ref, protocol: str = "paper") -> dict:
     held = measure(ref, protocol=protocol, orientations_deg=HELD_OUT_DEG)
     for name, f in preds.items():
         out[f"held_out_{name}"] = _nrmse(f(held.wi, held.wr), held.values)
+    cal = calibration(model, ref, held.wi, held.wr, (preds["kes"],))
+    out["held_out_within_1sigma"], out["held_out_within_2sigma"] = cal["within_1sigma"], cal["within_2sigma"]
     wr, _, _ = hemisphere_directions()
     wr = wr.reshape(-1, 3)
     for (ti, pi), tag in zip(HEMISPHERE_LIGHTS_DEG, ("hemi90", "hemi45")):
@@ -110,6 +116,9 @@ def evaluate_reference(ref, protocol: str = "paper") -> dict:
         truth = np.asarray(ref(wi, wr))
         for name, f in preds.items():
             out[f"{tag}_{name}"] = _nrmse(f(wi, wr), truth)
+        if tag == "hemi90":
+            cal = calibration(model, ref, wi, wr, (preds["kes"],))
+            out["hemi90_within_1sigma"], out["hemi90_within_2sigma"] = cal["within_1sigma"], cal["within_2sigma"]
     return out
 
 
@@ -157,6 +166,8 @@ def run(dense: bool = True, with_curet: bool = True) -> dict:
             result["families"][fam] = {"skipped": "reference unavailable (Mitsuba not importable)"}
             continue
         summary = {f"{case}_{m}": _median(rows, f"{case}_{m}") for case in ("held_out", "hemi90", "hemi45") for m in MODELS}
+        for key in ("held_out_within_1sigma", "held_out_within_2sigma", "hemi90_within_1sigma", "hemi90_within_2sigma"):
+            summary[key] = _median(rows, key)
         summary["fit_cpu_s_max"] = max(r["fit_cpu_s"] for r in rows)
         summary["fit_cpu_s_median"] = _median(rows, "fit_cpu_s")
         summary["round_trip_max_rel"] = max(r["round_trip_max_rel"] for r in rows)
