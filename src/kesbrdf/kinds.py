@@ -83,6 +83,7 @@ __all__ = [
 KIND_MODULES: dict[str, str] = {
     "kes": "kesbrdf.model",
     "kes-halfdiff": "kesbrdf.halfdiff",
+    "fibre-prior": "kesbrdf.prior_model",
 }
 
 #: Where each fitter lives: every kind, plus fitting methods that produce an existing

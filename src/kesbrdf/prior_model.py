@@ -1,0 +1,359 @@
+r"""Model kind ``fibre-prior``: the woven-cloth prior times a KES-interpolated residual.
+
+.. math::
+
+    f_r(\omega_i,\omega_r) = f_\text{prior}(\omega_i,\omega_r)\cdot r(\omega_i,\omega_r)^{\tau(\gamma)}
+
+* :math:`f_\text{prior}` is :class:`kesbrdf.prior.FibrePrior`, fitted to all usable rows;
+* the residual ratio :math:`r = y / f_\text{prior}` is taken on the in-plane samples of
+  the KES incidence line (θ_i + θ_r = 90° in the paper protocol) and interpolated over
+  the deviation azimuth φ with the whole-circle extended KES form and linearly over γ,
+  by the same code as the ``kes`` kind (:func:`kesbrdf.model.fit` on the ratio, read
+  back with :func:`kesbrdf.brdf.lookup` and divided by the line weight
+  √((cos γ + cos S)/2), which the KES table carries);
+* τ(γ) = 1 inside the measured γ range and falls smoothly (smoothstep) to 0 over
+  :data:`RELAX_DEG` beyond it, so the residual relaxes to 1 where nothing was measured.
+
+With ``residual=False`` the model is the pure prior.  Every measured sample on the
+KES line with y above the noise floor is reproduced to round-off (the ratio is
+multiplied back exactly there).  Samples with y ≤ 0 cannot be reproduced by a
+positive model: they are floored at ε = 10⁻⁴·max y before the ratio is taken.
+
+:func:`loo_compare` runs leave-one-orientation-out validation of this kind against
+``kes`` on the user's own data, for ``kind="auto"`` to use.
+"""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from kesbrdf.brdf import lookup, to_phi_gamma
+from kesbrdf.errors import MeasurementError, ModelError
+from kesbrdf.kinds import ReflectanceModel, register
+from kesbrdf.measurement import Measurement
+from kesbrdf.prior import FibrePrior, fit_prior, fresnel_dielectric
+
+__all__ = ["FibrePriorModel", "loo_compare", "predict_with_uncertainty", "calibration", "RELAX_DEG"]
+
+#: Width of the relaxation of the residual toward 1 beyond the measured γ range.
+RELAX_DEG = 15.0
+#: Relative floor of the measured values before the ratio is taken.
+RATIO_FLOOR = 1e-4
+_FIT_OPTIONS = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
+
+
+def _line_weight(gamma, line_sum):
+    return np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2.0, 1e-300, None))
+
+
+@register
+class FibrePriorModel(ReflectanceModel):
+    """The fibre prior with an optional KES residual (module docstring)."""
+
+    kind = "fibre-prior"
+    mappings = ("deviation",)
+
+    def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
+                 diagnostics=None, input_info=None):
+        self.prior = prior
+        self.residual = residual  # SimpleNamespace(phi_grid, gamma_grid, table, line_sum, gamma_max) or None
+        self.channels = tuple(channels)
+        self.parameters = dict(parameters or {})
+        self.diagnostics = dict(diagnostics or {})
+        self.input_info = dict(input_info or {})
+
+    # -- evaluation ---------------------------------------------------------------
+    def residual_ratio(self, wi, wr) -> np.ndarray:
+        """r(ωi, ωr)^τ(γ), shape (..., C); 1 everywhere for a pure prior."""
+        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+        if self.residual is None:
+            return np.ones(wi.shape[:-1] + (self.n_channels,))
+        res = self.residual
+        if getattr(res, "mode", "line") == "halfdiff":
+            from kesbrdf.halfdiff import lookup_halfdiff, to_half_diff
+
+            phi_h, theta_h, theta_d = to_half_diff(wi, wr)
+            r = lookup_halfdiff(res, phi_h, theta_h, theta_d)
+            x = np.clip((theta_h - res.theta_h_max) / math.radians(RELAX_DEG), 0.0, 1.0)
+            tau = 1.0 - x * x * (3.0 - 2.0 * x)
+            return np.exp(tau[..., None] * np.log(np.maximum(r, 1e-300)))
+        phi, gamma = to_phi_gamma(wi, wr, "deviation")
+        g_in = np.minimum(gamma, res.gamma_max)
+        q = lookup(res, phi, g_in)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r = q / _line_weight(g_in, res.line_sum)[..., None]
+        x = np.clip((gamma - res.gamma_max) / math.radians(RELAX_DEG), 0.0, 1.0)
+        tau = 1.0 - x * x * (3.0 - 2.0 * x)
+        return np.exp(tau[..., None] * np.log(np.maximum(r, 1e-300)))
+
+    def evaluate(self, wi, wr, mapping=None) -> np.ndarray:
+        self.check_mapping(mapping)
+        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+        f = self.prior(wi, wr)
+        if self.residual is not None:
+            f = f * self.residual_ratio(wi, wr)
+        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
+        f = np.where(above[..., None] & np.isfinite(f), f, 0.0)
+        nan = np.isnan(wi).any(-1) | np.isnan(wr).any(-1)
+        return np.where(nan[..., None], np.nan, f)
+
+    __call__ = evaluate
+
+    # -- files --------------------------------------------------------------------
+    def to_payload(self):
+        fields = {"prior": self.prior.to_dict(), "has_residual": self.residual is not None}
+        arrays = {}
+        res = self.residual
+        if res is not None and getattr(res, "mode", "line") == "halfdiff":
+            fields["residual"] = {"mode": "halfdiff", "theta_h_max": float(res.theta_h_max)}
+            arrays = {"residual_phi_grid": res.phi_grid, "residual_theta_h_grid": res.theta_h_grid,
+                      "residual_theta_d_grid": res.theta_d_grid, "residual_table": res.table}
+        elif res is not None:
+            fields["residual"] = {"mode": "line", "line_sum": float(res.line_sum), "gamma_max": float(res.gamma_max)}
+            arrays = {"residual_phi_grid": res.phi_grid, "residual_gamma_grid": res.gamma_grid,
+                      "residual_table": res.table}
+        return fields, arrays
+
+    @classmethod
+    def from_payload(cls, fields, arrays, shared, source=None):
+        try:
+            prior = FibrePrior.from_dict(fields["prior"])
+            residual = None
+            if fields.get("has_residual") and fields["residual"].get("mode") == "halfdiff":
+                table = np.asarray(arrays["residual_table"], float)
+                grids = [np.asarray(arrays[f"residual_{k}_grid"], float) for k in ("phi", "theta_h", "theta_d")]
+                if table.shape[:3] != tuple(g.size for g in grids):
+                    raise ModelError(f"{source or 'model'}: residual table shape {table.shape} does not match its grids")
+                residual = SimpleNamespace(mode="halfdiff", phi_grid=grids[0], theta_h_grid=grids[1], theta_d_grid=grids[2],
+                                           table=table, theta_h_max=float(fields["residual"]["theta_h_max"]))
+            elif fields.get("has_residual"):
+                table = np.asarray(arrays["residual_table"], float)
+                phi, gamma = np.asarray(arrays["residual_phi_grid"]), np.asarray(arrays["residual_gamma_grid"])
+                if table.shape[:2] != (phi.size, gamma.size):
+                    raise ModelError(f"{source or 'model'}: residual table shape {table.shape} does not match grids ({phi.size}, {gamma.size})")
+                residual = SimpleNamespace(phi_grid=phi, gamma_grid=gamma, table=table,
+                                           line_sum=float(fields["residual"]["line_sum"]),
+                                           gamma_max=float(fields["residual"]["gamma_max"]))
+        except (KeyError, TypeError, MeasurementError) as exc:
+            raise ModelError(f"{source or 'model'}: bad fibre-prior payload ({exc})") from None
+        return cls(prior, residual, channels=shared.get("channels", ("value",)), parameters=shared.get("parameters"),
+                   diagnostics=shared.get("diagnostics"), input_info=shared.get("input_info"))
+
+    # -- fitting ------------------------------------------------------------------
+    @classmethod
+    def usable_rows(cls, measurement):
+        m = measurement
+        ok = (m.theta_i < np.pi / 2) & (m.theta_r < np.pi / 2) & np.all(np.isfinite(m.values), axis=1)
+        return ok, "needs finite values with both directions above the horizon"
+
+    @classmethod
+    def fit_measurement(cls, measurement, **options):
+        unknown = sorted(set(options) - set(_FIT_OPTIONS))
+        if unknown:
+            raise ModelError(f"fibre-prior fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(_FIT_OPTIONS)}")
+        residual_opt = options.pop("residual", "auto")
+        m = measurement
+        rows, _ = cls.usable_rows(m)
+        prior = fit_prior(m, rows=rows, **options)
+        residual, note = None, "residual off"
+        if residual_opt:
+            try:
+                residual, note = _fit_residual(prior, m.subset(rows)), "KES residual on the incidence line"
+            except MeasurementError as exc:
+                if residual_opt is True:
+                    raise
+                note = f"no residual: {exc}"
+        return cls(prior, residual, channels=m.channels,
+                   parameters={"residual": residual is not None, "prior": prior.report.get("chosen"),
+                               "theta_d_law": f"Fresnel eta={1.5} normalised at 45 deg"
+                               + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else "")},
+                   diagnostics={"fit": prior.report, "residual": note}, input_info=m.input_info())
+
+
+def _ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
+    """In-plane rows of ``m`` with values y / f_prior (y floored at ε = RATIO_FLOOR·max y)."""
+    if not np.any(m.is_in_plane):
+        raise MeasurementError("the residual needs in-plane samples at psi = 0, 45, 90 deg; got none")
+    inp = m.subset(m.is_in_plane)
+    y = inp.values
+    eps = RATIO_FLOOR * np.max(np.abs(y), axis=0)
+    ratio = np.maximum(y, eps) / np.maximum(prior(inp.wi, inp.wr), 1e-300)
+    return Measurement.in_plane(inp.psi, inp.theta_i, inp.theta_r, ratio, channels=inp.channels)
+
+
+def _ratio_table(rm: Measurement):
+    """KES table of a ratio measurement (module docstring)."""
+    from kesbrdf.model import fit as kes_fit
+
+    km = kes_fit(rm, body="none", fallback="log", noise_floor=1e-12)
+    line_sum = math.radians(km.diagnostics["incidence_line_deg"])
+    return SimpleNamespace(phi_grid=km.phi_grid, gamma_grid=km.gamma_grid, table=km.table,
+                           line_sum=line_sum, gamma_max=float(km.gamma_grid[-1]))
+
+
+def _incidence_lines(m: Measurement) -> int:
+    """How many θ_i + θ_r lines hold at least 8 in-plane samples."""
+    total = np.round(np.degrees(m.theta_i + m.theta_r)[m.is_in_plane], 6)
+    _, counts = np.unique(total, return_counts=True)
+    return int(np.count_nonzero(counts >= 8))
+
+
+def _halfdiff_table(rm: Measurement):
+    """(φ_h, θ_h, θ_d) table of a ratio measurement with several incidence lines."""
+    from kesbrdf.halfdiff import fit_halfdiff, in_plane_half_diff
+
+    hd = fit_halfdiff(rm, body="none", fallback="log", noise_floor=1e-12, normalisation="none")
+    theta_h = in_plane_half_diff(rm.theta_i, rm.theta_r)[0]
+    return SimpleNamespace(mode="halfdiff", phi_grid=hd.phi_grid, theta_h_grid=hd.theta_h_grid,
+                           theta_d_grid=hd.theta_d_grid, table=hd.table, body=np.zeros(rm.n_channels),
+                           theta_h_max=float(np.max(theta_h)))
+
+
+def _fit_residual(prior: FibrePrior, m: Measurement):
+    """The residual of ``prior`` on ``m``: the KES line table for one incidence line, the
+    (φ_h, θ_h, θ_d) table (:mod:`kesbrdf.halfdiff`) for several; raises
+    MeasurementError without KES orientations."""
+    rm = _ratio_measurement(prior, m)
+    if _incidence_lines(rm) > 1:
+        return _halfdiff_table(rm)
+    return _ratio_table(rm)
+
+
+def _nrmse(pred, truth):
+    return float(np.sqrt(np.mean((pred - truth) ** 2)) / max(float(np.mean(np.abs(truth))), 1e-300))
+
+
+def loo_compare(measurement, **fit_options) -> dict:
+    """Leave-one-orientation-out NRMSE of ``fibre-prior`` (with and without residual) and ``kes``.
+
+    Each measured orientation is predicted from the others.  ``kes`` can predict only a
+    bias (it needs warp and weft; :func:`kesbrdf.validation.leave_one_orientation_out`);
+    the pure prior predicts every orientation; prior + residual is reported for the
+    biases, with the residual built from the remaining orientations exactly as ``kes``
+    builds its table (the other bias mirrored, y → −y).
+
+    Returns
+    -------
+    dict
+        ``{"orientations": {psi_deg: {candidate: nrmse}}, "median": {candidate: median over
+        the biases}, "best": candidate with the lowest median on the biases}``.
+    """
+    from kesbrdf.validation import _mirror_135_to_45, leave_one_orientation_out
+
+    m = measurement
+    psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
+    kes_loo = leave_one_orientation_out(m, fallback="log")
+    table = {}
+    for held in (0.0, 45.0, 90.0, 135.0):
+        test_rows = np.abs(psi_deg - held) < 0.5
+        if not test_rows.any():
+            continue
+        test = m.subset(test_rows)
+        train = m.subset(~test_rows & np.isfinite(psi_deg))
+        prior = fit_prior(train, **fit_options)
+        row = {"prior": _nrmse(prior(test.wi, test.wr), test.values)}
+        entry = kes_loo.get(f"{held:g}", {})
+        if entry.get("possible"):
+            row["kes"] = entry["metrics"]["all"]["nrmse"]
+            other = 135.0 if held == 45.0 else 45.0
+            ratio_m = _ratio_measurement(prior, train)
+            rpsi = np.degrees(ratio_m.psi)
+            keep = (np.abs(rpsi - 0) < 0.5) | (np.abs(rpsi - 90) < 0.5)
+            other_rows = np.abs(rpsi - other) < 0.5
+            base = ratio_m.subset(keep)
+            bias = _mirror_135_to_45(ratio_m, other_rows) if held == 45.0 else ratio_m.subset(other_rows)
+            rtrain = Measurement.in_plane(np.concatenate([base.psi, bias.psi]), np.concatenate([base.theta_i, bias.theta_i]),
+                                          np.concatenate([base.theta_r, bias.theta_r]), np.concatenate([base.values, bias.values]),
+                                          channels=m.channels)
+            model = FibrePriorModel(prior, _ratio_table(rtrain), channels=m.channels)
+            if held == 135.0:
+                pred = model.evaluate(test.wi, test.wr)
+            else:  # the residual was built in the mirrored frame; the prior was not
+                flip = np.array([1.0, -1.0, 1.0])
+                ratio = model.residual_ratio(test.wr * flip, test.wi * flip)
+                pred = prior(test.wi, test.wr) * ratio
+            row["prior+residual"] = _nrmse(pred, test.values)
+        table[f"{held:g}"] = row
+    cands = ("kes", "prior", "prior+residual")
+    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in cands
+              if any(c in r and k in ("45", "135") for k, r in table.items())}
+    bias_median = {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
+                   for c in cands if any(k in table and c in table[k] for k in ("45", "135"))}
+    best = min(bias_median, key=bias_median.get) if bias_median else None
+    return {"orientations": table, "median": median, "median_biases": bias_median, "best": best}
+
+
+#: Largest σ of ln f reported (a factor e³ ≈ 20): beyond it the number means "unknown".
+MAX_SIGMA_LOG = 3.0
+
+
+def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=()):
+    r"""Prediction and a per-prediction σ: fit noise (Laplace) ⊕ spread between candidates.
+
+    .. math::
+
+        \sigma_{\ln f}^2 = g^\top \Sigma_\theta\, g \;+\; \frac{1}{K}\sum_k (\ln f_k - \ln f)^2
+
+    The first term is the fit: g = ∂ ln f_prior/∂θ (batched forward difference) and
+    Σ_θ the Laplace covariance of the prior's fit (:func:`kesbrdf.prior._laplace_covariance`).
+    The second is the model term: the RMS log difference between the prediction f
+    (prior + residual, or the pure prior) and the other candidates f_k, namely the pure
+    prior (when the model has a residual) and every callable in ``others`` (e.g. the
+    ``kes`` model of the same data).  When the data holds one θ_d slice (the paper
+    protocol), a third term adds the spread between the default θ_d law and none,
+    (w_s ln Φ(θ_d))², w_s = (f_prior − k_d)/f_prior the specular fraction: zero on the
+    measured slice θ_d = 45°, growing away from it.  Logs use ε = 10⁻⁴·max f so dark
+    regions do not dominate.
+
+    Returns
+    -------
+    f : ndarray (N, C)
+        The model's prediction, 1/sr.
+    sigma : ndarray (N, C)
+        σ in 1/sr (f·σ_ln f, the log-normal first-order width).
+    sigma_log : ndarray (N, C)
+        σ of ln f, capped at :data:`MAX_SIGMA_LOG`.
+    """
+    wi = np.asarray(wi, float).reshape(-1, 3)
+    wr = np.asarray(wr, float).reshape(-1, 3)
+    wi, wr = np.broadcast_arrays(wi, wr)
+    f = model.evaluate(wi, wr)
+    eps = max(float(np.nanmax(f)), 1e-300) * 1e-4
+    var = np.zeros_like(f)
+    prior = model.prior
+    above = (wi[:, 2] > 0) & (wr[:, 2] > 0)
+    if prior.cov is not None and above.any():
+        g = prior.log_jacobian(wi[above], wr[above])  # (n, C, P)
+        var[above] = np.einsum("ncp,pq,ncq->nc", g, prior.cov, g)
+    cands = list(others)
+    if model.residual is not None:
+        cands.append(prior)
+    if cands:
+        lf = np.log(f + eps)
+        spread = [(np.log(np.maximum(np.asarray(c(wi, wr), float), 0) + eps) - lf) ** 2 for c in cands]
+        var = var + np.mean(spread, axis=0)
+    if not prior.spec.free_theta_d:
+        # θ_d law not identified by the data (one θ_d slice): the spread between the
+        # default Fresnel law and no θ_d dependence at all, on the specular fraction
+        h = wi + wr
+        h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
+        log_phi = np.log(np.maximum(fresnel_dielectric(np.sum(wi * h, axis=-1)) / fresnel_dielectric(np.cos(np.pi / 4)), 1e-300))
+        fp = prior(wi, wr)
+        kd = np.exp([prior.parameters()[f"log_kd_{c}"] for c in range(prior.spec.n_channels)])
+        spec_frac = np.clip((fp - kd) / np.maximum(fp, 1e-300), 0.0, 1.0)
+        var = var + (spec_frac * log_phi[:, None]) ** 2
+    sigma_log = np.minimum(np.sqrt(np.maximum(var, 0)), MAX_SIGMA_LOG)
+    return f, f * sigma_log, sigma_log
+
+
+def calibration(model: FibrePriorModel, reference, wi, wr, others=()) -> dict:
+    """Fraction of reference truths within 1σ and 2σ of the prediction (log space)."""
+    f, _, sl = predict_with_uncertainty(model, wi, wr, others)
+    truth = np.asarray(reference(wi, wr), float)
+    eps = max(float(np.max(truth)), 1e-300) * 1e-4
+    z = np.abs(np.log(np.maximum(truth, 0) + eps) - np.log(f + eps)) / np.maximum(sl, 1e-12)
+    return {"within_1sigma": float(np.mean(z <= 1)), "within_2sigma": float(np.mean(z <= 2)),
+            "median_sigma_log": float(np.median(sl)), "n": int(z.size)}
