@@ -22,6 +22,9 @@ import pytest
 from batch_helpers import N_BROKEN, N_GOOD, leftovers, manifests
 
 CORE = ("fit", "validate", "export")
+#: The export step with the cheapest format (BRDF Explorer: a baked table, ~0.1 s); every
+#: format's own file is tested in tests/export, and the analytic fits take 20-50 s each.
+FAST = {"export": {"formats": ["brdf-explorer"]}}
 
 
 def _outputs(out: Path) -> dict:
@@ -35,7 +38,7 @@ def serial(library, tmp_path_factory):
     from kesbrdf.batch import run_batch
 
     out = tmp_path_factory.mktemp("serial")
-    result = run_batch(library, out, steps=CORE, workers=0)
+    result = run_batch(library, out, steps=CORE, workers=0, settings=FAST)
     return out, result
 
 
@@ -81,7 +84,7 @@ def test_rerun_skips_every_finished_step(serial, library, tmp_path):
     out, _ = serial
     before = {k: (v["finished_unix"], (out / k[0] / k[1] / "manifest.json").stat().st_mtime_ns)
               for k, v in manifests(out).items()}
-    again = run_batch(library, out, steps=CORE, workers=0)
+    again = run_batch(library, out, steps=CORE, workers=0, settings=FAST)
     assert again.counts["skipped"] == N_GOOD and again.counts["done"] == 0
     after = {k: (v["finished_unix"], (out / k[0] / k[1] / "manifest.json").stat().st_mtime_ns)
              for k, v in manifests(out).items()}
@@ -94,7 +97,7 @@ def test_rerun_skips_every_finished_step(serial, library, tmp_path):
     fabrics = read_catalog(library)
     fabrics[0].options["orientations"] = 3
     copy = shutil.copytree(out, tmp_path / "copy")
-    third = run_batch(fabrics[:1], copy, steps=CORE, workers=0, write_summary=False)
+    third = run_batch(fabrics[:1], copy, steps=CORE, workers=0, write_summary=False, settings=FAST)
     st = third.records[0]["steps"]
     assert st["ingest"]["status"] == "skipped"
     assert st["fit"]["status"] == "done" and st["validate"]["status"] == "done"
@@ -117,7 +120,7 @@ def test_dask_run_equals_serial_bit_for_bit_with_a_worker_killed(cluster, serial
             killed.append(pid)
 
     out = tmp_path / "dask"
-    result = run_batch(library, out, steps=CORE, scheduler=cluster, retries=2, progress=kill_busy_worker)
+    result = run_batch(library, out, steps=CORE, scheduler=cluster, retries=2, progress=kill_busy_worker, settings=FAST)
     assert killed, "no worker was busy to kill"
     # a fabric whose finished result died with the worker is rerun and then finds every
     # step committed: it counts as skipped, not recomputed
@@ -163,7 +166,7 @@ def test_killed_driver_rerun_recomputes_nothing_finished(library, serial, tmp_pa
     out = tmp_path / "killed"
     env = {**os.environ, TEST_HOOKS_ENV: str(hooks), "PYTHONPATH": os.pathsep.join(sys.path)}
     proc = subprocess.Popen([sys.executable, "-m", "kesbrdf.cli.main", "batch", str(library), "-o", str(out),
-                             "--workers", "2", "--steps", ",".join(CORE), "--no-progress"],
+                             "--workers", "2", "--steps", ",".join(CORE), "--export-formats", "brdf-explorer", "--no-progress"],
                             env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         deadline = time.monotonic() + 60
@@ -183,7 +186,7 @@ def test_killed_driver_rerun_recomputes_nothing_finished(library, serial, tmp_pa
             assert (out / fid / step / name).is_file()
     stamps = {k: (out / k[0] / k[1] / "manifest.json").stat().st_mtime_ns for k in finished}
     hook_file.write_text("{}")
-    result = run_batch(library, out, steps=CORE, workers=0)
+    result = run_batch(library, out, steps=CORE, workers=0, settings=FAST)
     assert result.counts["done"] + result.counts["skipped"] == N_GOOD
     for rec in result.records:
         for step, s in rec["steps"].items():

@@ -67,6 +67,25 @@ class ExportResult:
         }
 
 
+def _jsonable(v):
+    """Plain JSON values of a format's report (numpy scalars and arrays become numbers and lists)."""
+    import json
+
+    return json.loads(json.dumps(v, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
+
+
+def _result_from_dict(fmt: str, d: dict) -> ExportResult:
+    """A format that reports with a plain dict: its numbers become ``agreement``."""
+    keys = ("format", "paths", "size", "open_with", "notes")
+    return ExportResult(
+        format=d.get("format", fmt),
+        paths=[Path(p) for p in d.get("paths", [])],
+        agreement=_jsonable({k: v for k, v in d.items() if k not in keys}),
+        notes=[str(n) for n in d.get("notes", [])],
+        open_with=str(d.get("open_with", "")),
+    )
+
+
 def format_names() -> tuple[str, ...]:
     from kesbrdf.export import FORMATS
 
@@ -157,6 +176,8 @@ def export(model, fmt: str, out, **options) -> ExportResult:
     _check_options(fmt, module, options)
     model = _load_model(model)
     result = module.export(model, out, **options)
+    if isinstance(result, dict):
+        result = _result_from_dict(fmt, result)
     if not isinstance(result, ExportResult):
         raise RuntimeError(f"export format {fmt!r} returned {type(result).__name__}, not ExportResult")
     result.format = result.format or fmt

@@ -249,7 +249,34 @@ def fit_error(material: AnalyticMaterial, params: dict, f_ref: Callable, grid=ER
     }
 
 
-def fit_analytic(
+#: Fits of the last few (model, material, grids) requests: the glTF and GLB exports share
+#: one glTF fit, MaterialX and USD share the OpenPBR one, so exporting every format of a
+#: model fits each material once.  Keyed by the model object's identity, held weakly.
+_FIT_CACHE: dict = {}
+_FIT_CACHE_SIZE = 8
+
+
+def fit_analytic(material: AnalyticMaterial, target, grid=FIT_GRID, error_grid=ERROR_GRID, max_nfev: int = 200,
+                 log_scale: float | str = 1.0) -> AnalyticFit:
+    """:func:`fit_analytic_uncached`, remembered for the same model object and arguments."""
+    import weakref
+
+    key = (id(target), material.name, repr(grid), repr(error_grid), max_nfev, repr(log_scale))
+    hit = _FIT_CACHE.get(key)
+    if hit is not None and hit[0]() is target:
+        return hit[1]
+    result = fit_analytic_uncached(material, target, grid, error_grid, max_nfev, log_scale)
+    try:
+        ref = weakref.ref(target)
+    except TypeError:  # objects without weak references are not cached
+        return result
+    if len(_FIT_CACHE) >= _FIT_CACHE_SIZE:
+        _FIT_CACHE.pop(next(iter(_FIT_CACHE)))
+    _FIT_CACHE[key] = (ref, result)
+    return result
+
+
+def fit_analytic_uncached(
     material: AnalyticMaterial, target, grid=FIT_GRID, error_grid=ERROR_GRID, max_nfev: int = 200, log_scale: float | str = 1.0
 ) -> AnalyticFit:
     """Fit ``material``'s parameters to ``target`` (a kesbrdf model or f(wi, wr) callable).

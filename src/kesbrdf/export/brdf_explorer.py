@@ -291,7 +291,12 @@ def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False):
     return np.where(above[..., None], f, 0.0)
 
 
-def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None, **_ignored) -> dict:
+#: File endings ``kesbrdf export`` accepts for this format (checked before any work).
+EXTENSIONS = (".brdf",)
+HELP = 'Disney BRDF Explorer analytic .brdf whose GLSL evaluates the KES table itself (not a fit)'
+
+
+def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) -> dict:
     """Write ``model`` as a BRDF Explorer analytic ``.brdf`` file.
 
     Returns

@@ -5,9 +5,13 @@ from __future__ import annotations
 __all__ = ["export"]
 
 
-def export(model, out, **options) -> dict:
+#: File endings ``kesbrdf export`` accepts for this format (checked before any work).
+EXTENSIONS = (".glb",)
+HELP = 'binary glTF 2.0 (.glb): the same fitted material and preview meshes'
+
+
+def export(model, out, *, fit=None, fit_grid=None, error_grid=None) -> dict:
     """Write a ``.glb`` (see :mod:`kesbrdf.export.gltf`)."""
     from kesbrdf.export.gltf import export as export_gltf
 
-    options["binary"] = True
-    return export_gltf(model, out, **options)
+    return export_gltf(model, out, binary=True, fit=fit, fit_grid=fit_grid, error_grid=error_grid)

@@ -134,7 +134,12 @@ def _model_info(model) -> dict:
     return info
 
 
-def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, error_grid=None, **_ignored) -> dict:
+#: File endings ``kesbrdf export`` accepts for this format (checked before any work).
+EXTENSIONS = (".gltf",)
+HELP = 'glTF 2.0 (JSON + embedded buffer): fitted metallic-roughness + KHR anisotropy/sheen/specular on a swatch and a sphere'
+
+
+def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, error_grid=None) -> dict:
     """Write ``model``'s fitted glTF material on a swatch and a sphere to ``out``.
 
     Parameters

@@ -137,7 +137,12 @@ def build_document(fits: dict, name: str = "kesbrdf_fabric"):
     return doc, lib
 
 
-def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=None, error_grid=None, name: str = "kesbrdf_fabric", **_ignored) -> dict:
+#: File endings ``kesbrdf export`` accepts for this format (checked before any work).
+EXTENSIONS = (".mtlx",)
+HELP = 'MaterialX document: fitted OpenPBR Surface and Autodesk Standard Surface materials'
+
+
+def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=None, error_grid=None, name: str = "kesbrdf_fabric") -> dict:
     """Write ``model``'s OpenPBR and Standard Surface fits to a ``.mtlx`` file.
 
     Parameters

@@ -146,7 +146,12 @@ def build_stage(stage, fit, mtlx_name: str | None):
     return material
 
 
-def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=None, write_mtlx: bool = True, **_ignored) -> dict:
+#: File endings ``kesbrdf export`` accepts for this format (checked before any work).
+EXTENSIONS = (".usda", ".usd")
+HELP = 'USD stage: OpenPBR network + UsdPreviewSurface fallback bound to preview meshes (writes the .mtlx beside it)'
+
+
+def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=None, write_mtlx: bool = True) -> dict:
     """Write a ``.usda`` stage (and, by default, the sidecar ``.mtlx``) for ``model``.
 
     Returns
