@@ -9,6 +9,11 @@ __all__ = ["run_demo_batch", "DEMO_FABRICS", "DEMO_BROKEN"]
 #: 10 good + 2 deliberately broken fabrics = the 12 of the demo
 DEMO_FABRICS = 10
 DEMO_BROKEN = 2
+#: Export formats of the demo batch: the BRDF Explorer file (a baked table, ~0.1 s and
+#: 0.4 MB a fabric).  The analytic fits (glTF, MaterialX, USD) take 20-50 s and the RGL
+#: tensors 22-44 MB a fabric; ``kesbrdf batch`` exports every format unless told otherwise,
+#: and the demo exports every format for its own fabric (out/demo/exports).
+DEMO_EXPORT_FORMATS = ("brdf-explorer",)
 
 
 def run_demo_batch(out, quick: bool = False, workers: int = 2, progress=None, scheduler=None):
@@ -26,7 +31,8 @@ def run_demo_batch(out, quick: bool = False, workers: int = 2, progress=None, sc
     out = Path(out)
     catalog = simulate_library(DEMO_FABRICS, out / "library", seed=2026, broken=DEMO_BROKEN)
     steps = ("ingest", "fit", "validate", "export") + (() if quick else ("preview",))
-    result = run_batch(catalog, out / "results", steps=steps, workers=workers, scheduler=scheduler)
+    result = run_batch(catalog, out / "results", steps=steps, workers=workers, scheduler=scheduler,
+                       settings={"export": {"formats": list(DEMO_EXPORT_FORMATS)}})
     if progress is not None:
         c = result.counts
         progress(f"batch: {c['done'] + c['skipped']} ok, {c['failed']} failed (as intended) in {result.seconds:.1f} s; "
