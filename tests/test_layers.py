@@ -37,8 +37,9 @@ LAYERS = [
             "kesbrdf.demo_data"]),
     ("kes", ["kesbrdf.kes"]),
     ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior", "kesbrdf.prior_model"]),
-    ("brdf", ["kesbrdf.brdf", "kesbrdf.fitting", "kesbrdf"]),
-    ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare", "kesbrdf.planning"]),
+    ("brdf", ["kesbrdf.brdf"]),
+    ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare", "kesbrdf.selection"]),
+    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.planning"]),
     ("apps", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.cli", "kesbrdf.viewer", "kesbrdf.cloth",
               "kesbrdf.export", "kesbrdf.batch"]),
 ]

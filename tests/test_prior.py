@@ -12,7 +12,8 @@ from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.gonio import measure
 from kesbrdf.kinds import kind_class
 from kesbrdf.prior import FibrePrior, PriorSpec, fit_prior
-from kesbrdf.prior_model import FibrePriorModel, loo_compare
+from kesbrdf.prior_model import FibrePriorModel
+from kesbrdf.selection import loo_compare
 from kesbrdf.references.irawan2012 import Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
 

@@ -50,6 +50,10 @@ class FitReport:
         Rows each candidate could use (``kind="auto"`` only).
     warnings : list of str
         The model's one-line warnings.
+    comparison : dict or None
+        ``kind="auto"`` on in-plane data: the leave-one-orientation-out comparison of the
+        row-based choice with the woven-cloth prior (:func:`kesbrdf.selection.loo_compare`):
+        median NRMSE on the held-out biases per candidate, and which was kept.
     """
 
     kind: str
@@ -60,6 +64,17 @@ class FitReport:
     rows_unused: str = ""
     candidates: dict = field(default_factory=dict)
     warnings: list = field(default_factory=list)
+    comparison: dict | None = None
+
+    def comparison_summary(self) -> str:
+        """One line: held-out NRMSE per candidate and the one kept ("" when not compared)."""
+        c = self.comparison
+        if not c:
+            return ""
+        med = c.get("median_biases") or {}
+        parts = ", ".join(f"{k} {v:.3f}" for k, v in sorted(med.items(), key=lambda kv: kv[1]))
+        what = (f"{c['folds']}-fold log RMSE" if "folds" in c else "leave-one-orientation-out NRMSE on the biases")
+        return f"{what}: {parts}; kept {c.get('kept')}"
 
     def summary(self) -> str:
         """One line for a terminal: kind, why, rows."""
@@ -81,6 +96,7 @@ class FitReport:
             "rows_unused": self.rows_unused,
             "candidates": dict(self.candidates),
             "warnings": list(self.warnings),
+            "comparison": self.comparison,
         }
 
 
@@ -127,7 +143,11 @@ def _protocol(name: str) -> str:
     }.get(name, name)
 
 
-def fit(measurement, kind: str = "auto", strict: bool = False, **options):
+#: The prior's candidates in :func:`kesbrdf.selection.loo_compare` and the options that build them.
+PRIOR_CANDIDATES = {"prior": {"residual": False}, "prior+residual": {"residual": True}}
+
+
+def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = True, **options):
     """Fit a model to ``measurement``; returns ``(model, FitReport)``.
 
     Parameters
@@ -139,6 +159,12 @@ def fit(measurement, kind: str = "auto", strict: bool = False, **options):
     strict : bool
         Make the K(φ) ≤ 0 log fallback an error (``fallback="error"``); only for the
         kinds that have that option.
+    compare : bool
+        ``kind="auto"`` only: when the row-based choice is ``kes`` and the woven-cloth
+        prior (``fibre-prior``) can use every row too, compare them by
+        leave-one-orientation-out validation on this measurement and keep the better
+        (``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
+        skips it, and so does any fit option (options belong to one kind).
     **options
         Passed to the fitter; an option it does not accept is an error.
 
@@ -161,6 +187,20 @@ def fit(measurement, kind: str = "auto", strict: bool = False, **options):
             raise KesbrdfError(f"expected kind one of {', '.join(('auto',) + known_fitters())}, got {kind!r}")
         mask, why_not = fitter_class(kind).usable_rows(m)
         name, why, counts = kind, "asked for", {}
+    comparison = None
+    if kind == "auto" and compare and not options and not strict and name == "scattered":
+        comparison = _kfold_with_prior(m)
+        if comparison and comparison["kept"] == "fibre-prior":
+            name = "fibre-prior"
+            mask, why_not = fitter_class(name).usable_rows(m)
+            why = f"fibre-prior beat the scattered KES fit in {comparison['folds']}-fold cross-validation on this data"
+    elif kind == "auto" and compare and not options and not strict and name == "kes":
+        comparison = _compare_with_prior(m)
+        if comparison and comparison["kept"] in PRIOR_CANDIDATES:
+            name = "fibre-prior"
+            mask, why_not = fitter_class(name).usable_rows(m)
+            options = dict(PRIOR_CANDIDATES[comparison["kept"]])
+            why = f"{comparison['kept']} beat kes in leave-one-orientation-out validation on this data"
     cls = fitter_class(name)
     _check_options(name, cls, options, strict)
     if strict:
@@ -177,10 +217,56 @@ def fit(measurement, kind: str = "auto", strict: bool = False, **options):
         rows_unused=f"{unused} row(s): {why_not}" if unused else "",
         candidates=counts,
         warnings=list(getattr(model, "warnings", [])),
+        comparison=comparison,
     )
     if isinstance(model.diagnostics, dict):
         model.diagnostics["fit_report"] = report.to_dict()
     return model, report
+
+
+def _kfold_with_prior(m) -> dict | None:
+    """:func:`kesbrdf.selection.kfold_compare` of the scattered fit and the prior."""
+    try:
+        prior_cls = fitter_class("fibre-prior")
+    except (ImportError, KesbrdfError):
+        return None
+    mask, _ = prior_cls.usable_rows(m)
+    if not mask.all():
+        return None
+    from kesbrdf.selection import kfold_compare
+
+    try:
+        result = kfold_compare(m, ("scattered", "fibre-prior"))
+    except KesbrdfError:
+        return None
+    result["kept"] = result["best"] or "scattered"
+    result["median_biases"] = result["median"]  # one line for FitReport.comparison_summary
+    return result
+
+
+def _compare_with_prior(m) -> dict | None:
+    """:func:`kesbrdf.selection.loo_compare` when the prior can use every row, with the
+    candidate kept (``"kes"`` unless a prior candidate has the lower median NRMSE)."""
+    try:
+        prior_cls = fitter_class("fibre-prior")
+    except (ImportError, KesbrdfError):  # the prior needs scipy (extra "fit")
+        return None
+    mask, _ = prior_cls.usable_rows(m)
+    if not mask.all():
+        return None
+    from kesbrdf.selection import loo_compare
+
+    try:
+        result = loo_compare(m)
+    except KesbrdfError:  # too few orientations to hold one out: nothing to compare
+        return None
+    med = result.get("median_biases") or {}
+    kept = "kes"
+    if "kes" in med:
+        best = min(med, key=med.get)
+        kept = best if med[best] < med["kes"] else "kes"
+    result["kept"] = kept
+    return result
 
 
 def _check_options(name, cls, options, strict) -> None:

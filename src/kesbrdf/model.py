@@ -346,7 +346,9 @@ def lookup(model, phi, gamma) -> np.ndarray:
     phi = np.mod(phi.reshape(-1), 2 * np.pi)
     gamma = np.clip(gamma.reshape(-1), 0.0, None)
     nan = ~(np.isfinite(phi) & np.isfinite(gamma))
-    q = model.lookup_unit(np.where(nan, 0.0, phi), np.where(nan, 0.0, gamma))
+    # any table holder (phi_grid, gamma_grid, table) works, e.g. the prior's residual
+    unit = model.lookup_unit if hasattr(model, "lookup_unit") else Model.lookup_unit.__get__(model)
+    q = unit(np.where(nan, 0.0, phi), np.where(nan, 0.0, gamma))
     q[nan] = np.nan
     return q.reshape(shape + (model.table.shape[-1],))
 

@@ -19,8 +19,8 @@ KES line with y above the noise floor is reproduced to round-off (the ratio is
 multiplied back exactly there).  Samples with y ≤ 0 cannot be reproduced by a
 positive model: they are floored at ε = 10⁻⁴·max y before the ratio is taken.
 
-:func:`loo_compare` runs leave-one-orientation-out validation of this kind against
-``kes`` on the user's own data, for ``kind="auto"`` to use.
+:func:`kesbrdf.selection.loo_compare` runs leave-one-orientation-out validation of this
+kind against ``kes`` on the user's own data, for ``kind="auto"`` to use.
 """
 
 from __future__ import annotations
@@ -30,23 +30,19 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from kesbrdf.brdf import lookup, to_phi_gamma
+from kesbrdf.mappings import to_phi_gamma
 from kesbrdf.errors import MeasurementError, ModelError
 from kesbrdf.kinds import ReflectanceModel, register
 from kesbrdf.measurement import Measurement
+from kesbrdf.model import line_weight, lookup
 from kesbrdf.prior import FibrePrior, fit_prior, fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "loo_compare", "predict_with_uncertainty", "calibration", "RELAX_DEG"]
+__all__ = ["FibrePriorModel", "RELAX_DEG", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
 #: Relative floor of the measured values before the ratio is taken.
 RATIO_FLOOR = 1e-4
-_FIT_OPTIONS = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
-
-
-def _line_weight(gamma, line_sum):
-    return np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2.0, 1e-300, None))
 
 
 @register
@@ -55,6 +51,7 @@ class FibrePriorModel(ReflectanceModel):
 
     kind = "fibre-prior"
     mappings = ("deviation",)
+    fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
 
     def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
                  diagnostics=None, input_info=None):
@@ -84,23 +81,21 @@ class FibrePriorModel(ReflectanceModel):
         g_in = np.minimum(gamma, res.gamma_max)
         q = lookup(res, phi, g_in)
         with np.errstate(invalid="ignore", divide="ignore"):
-            r = q / _line_weight(g_in, res.line_sum)[..., None]
+            r = q / line_weight(g_in, res.line_sum)[..., None]
         x = np.clip((gamma - res.gamma_max) / math.radians(RELAX_DEG), 0.0, 1.0)
         tau = 1.0 - x * x * (3.0 - 2.0 * x)
         return np.exp(tau[..., None] * np.log(np.maximum(r, 1e-300)))
 
-    def evaluate(self, wi, wr, mapping=None) -> np.ndarray:
-        self.check_mapping(mapping)
-        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+    def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:
+        """Prior × residual ratio at unit rows above the horizon (the base class supplies
+        normalisation, the horizon and NaN handling: :func:`kesbrdf.mappings.evaluate_pairs`)."""
         f = self.prior(wi, wr)
         if self.residual is not None:
             f = f * self.residual_ratio(wi, wr)
-        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
-        f = np.where(above[..., None] & np.isfinite(f), f, 0.0)
-        nan = np.isnan(wi).any(-1) | np.isnan(wr).any(-1)
-        return np.where(nan[..., None], np.nan, f)
+        return np.where(np.isfinite(f), f, 0.0)
 
-    __call__ = evaluate
+    def __call__(self, wi, wr):
+        return self.evaluate(wi, wr)
 
     # -- files --------------------------------------------------------------------
     def to_payload(self):
@@ -151,9 +146,9 @@ class FibrePriorModel(ReflectanceModel):
 
     @classmethod
     def fit_measurement(cls, measurement, **options):
-        unknown = sorted(set(options) - set(_FIT_OPTIONS))
+        unknown = sorted(set(options) - set(FibrePriorModel.fit_options))
         if unknown:
-            raise ModelError(f"fibre-prior fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(_FIT_OPTIONS)}")
+            raise ModelError(f"fibre-prior fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(FibrePriorModel.fit_options)}")
         residual_opt = options.pop("residual", "auto")
         m = measurement
         rows, _ = cls.usable_rows(m)
@@ -173,7 +168,7 @@ class FibrePriorModel(ReflectanceModel):
                    diagnostics={"fit": prior.report, "residual": note}, input_info=m.input_info())
 
 
-def _ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
+def ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
     """In-plane rows of ``m`` with values y / f_prior (y floored at ε = RATIO_FLOOR·max y)."""
     if not np.any(m.is_in_plane):
         raise MeasurementError("the residual needs in-plane samples at psi = 0, 45, 90 deg; got none")
@@ -184,7 +179,7 @@ def _ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
     return Measurement.in_plane(inp.psi, inp.theta_i, inp.theta_r, ratio, channels=inp.channels)
 
 
-def _ratio_table(rm: Measurement):
+def ratio_table(rm: Measurement):
     """KES table of a ratio measurement (module docstring)."""
     from kesbrdf.model import fit as kes_fit
 
@@ -216,74 +211,10 @@ def _fit_residual(prior: FibrePrior, m: Measurement):
     """The residual of ``prior`` on ``m``: the KES line table for one incidence line, the
     (φ_h, θ_h, θ_d) table (:mod:`kesbrdf.halfdiff`) for several; raises
     MeasurementError without KES orientations."""
-    rm = _ratio_measurement(prior, m)
+    rm = ratio_measurement(prior, m)
     if _incidence_lines(rm) > 1:
         return _halfdiff_table(rm)
-    return _ratio_table(rm)
-
-
-def _nrmse(pred, truth):
-    return float(np.sqrt(np.mean((pred - truth) ** 2)) / max(float(np.mean(np.abs(truth))), 1e-300))
-
-
-def loo_compare(measurement, **fit_options) -> dict:
-    """Leave-one-orientation-out NRMSE of ``fibre-prior`` (with and without residual) and ``kes``.
-
-    Each measured orientation is predicted from the others.  ``kes`` can predict only a
-    bias (it needs warp and weft; :func:`kesbrdf.validation.leave_one_orientation_out`);
-    the pure prior predicts every orientation; prior + residual is reported for the
-    biases, with the residual built from the remaining orientations exactly as ``kes``
-    builds its table (the other bias mirrored, y → −y).
-
-    Returns
-    -------
-    dict
-        ``{"orientations": {psi_deg: {candidate: nrmse}}, "median": {candidate: median over
-        the biases}, "best": candidate with the lowest median on the biases}``.
-    """
-    from kesbrdf.validation import _mirror_135_to_45, leave_one_orientation_out
-
-    m = measurement
-    psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
-    kes_loo = leave_one_orientation_out(m, fallback="log")
-    table = {}
-    for held in (0.0, 45.0, 90.0, 135.0):
-        test_rows = np.abs(psi_deg - held) < 0.5
-        if not test_rows.any():
-            continue
-        test = m.subset(test_rows)
-        train = m.subset(~test_rows & np.isfinite(psi_deg))
-        prior = fit_prior(train, **fit_options)
-        row = {"prior": _nrmse(prior(test.wi, test.wr), test.values)}
-        entry = kes_loo.get(f"{held:g}", {})
-        if entry.get("possible"):
-            row["kes"] = entry["metrics"]["all"]["nrmse"]
-            other = 135.0 if held == 45.0 else 45.0
-            ratio_m = _ratio_measurement(prior, train)
-            rpsi = np.degrees(ratio_m.psi)
-            keep = (np.abs(rpsi - 0) < 0.5) | (np.abs(rpsi - 90) < 0.5)
-            other_rows = np.abs(rpsi - other) < 0.5
-            base = ratio_m.subset(keep)
-            bias = _mirror_135_to_45(ratio_m, other_rows) if held == 45.0 else ratio_m.subset(other_rows)
-            rtrain = Measurement.in_plane(np.concatenate([base.psi, bias.psi]), np.concatenate([base.theta_i, bias.theta_i]),
-                                          np.concatenate([base.theta_r, bias.theta_r]), np.concatenate([base.values, bias.values]),
-                                          channels=m.channels)
-            model = FibrePriorModel(prior, _ratio_table(rtrain), channels=m.channels)
-            if held == 135.0:
-                pred = model.evaluate(test.wi, test.wr)
-            else:  # the residual was built in the mirrored frame; the prior was not
-                flip = np.array([1.0, -1.0, 1.0])
-                ratio = model.residual_ratio(test.wr * flip, test.wi * flip)
-                pred = prior(test.wi, test.wr) * ratio
-            row["prior+residual"] = _nrmse(pred, test.values)
-        table[f"{held:g}"] = row
-    cands = ("kes", "prior", "prior+residual")
-    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in cands
-              if any(c in r and k in ("45", "135") for k, r in table.items())}
-    bias_median = {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
-                   for c in cands if any(k in table and c in table[k] for k in ("45", "135"))}
-    best = min(bias_median, key=bias_median.get) if bias_median else None
-    return {"orientations": table, "median": median, "median_biases": bias_median, "best": best}
+    return ratio_table(rm)
 
 
 #: Largest σ of ln f reported (a factor e³ ≈ 20): beyond it the number means "unknown".

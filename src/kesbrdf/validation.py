@@ -96,7 +96,7 @@ def validate(model, m: Measurement, mapping: str | None = None) -> dict:
     return {"mapping": mapping, "n": len(m), "metrics": metrics(pred, m.values, channels)}
 
 
-def _mirror_135_to_45(m: Measurement, rows) -> Measurement:
+def mirror_135_to_45(m: Measurement, rows) -> Measurement:
     """Rows at ψ = 135° seen in the mirror y → −y: ψ = 45° with θ_i, θ_r swapped."""
     sub = m.subset(rows)
     return Measurement.in_plane(
@@ -129,7 +129,7 @@ def leave_one_orientation_out(m: Measurement, mapping: str = "deviation", **fit_
             out[f"{held:g}"] = {"possible": False, "reason": f"needs {other:g} deg"}
             continue
         base = m.subset(keep)
-        bias = _mirror_135_to_45(m, other_rows) if held == 45.0 else m.subset(other_rows)
+        bias = mirror_135_to_45(m, other_rows) if held == 45.0 else m.subset(other_rows)
         train = Measurement.in_plane(
             np.concatenate([base.psi, bias.psi]),
             np.concatenate([base.theta_i, bias.theta_i]),

@@ -35,6 +35,8 @@ def add_arguments(p):
                    "default: searched")
     p.add_argument("--interpolation", choices=("kes", "nearest", "linear"), default=None,
                    help="kes kind: interpolation over phi (nearest/linear are baselines)")
+    p.add_argument("--no-compare", action="store_true",
+                   help="auto: skip the held-out comparison with the woven-cloth prior (fibre-prior)")
 
 
 def _options(args) -> dict:
@@ -69,7 +71,11 @@ def run(args) -> int:
     m = read_measurement(args.measurement)
     for note in m.notes:
         stderr(f"note: {args.measurement}: {note}")
-    model, report = kesbrdf.fit(m, kind=args.kind, strict=args.strict, **options)
+    if args.kind == "auto" and not options and not args.strict and not args.no_compare:
+        stderr(f"{args.measurement}: comparing the kinds on held-out data (a few prior fits) ...")
+    model, report = kesbrdf.fit(m, kind=args.kind, strict=args.strict, compare=not args.no_compare, **options)
+    if report.comparison:
+        stderr(f"{args.measurement}: {report.comparison_summary()}")
     stderr(f"{args.measurement}: {report.summary()}")
     for w in report.warnings:
         stderr(f"warning: {w}")
