@@ -36,8 +36,9 @@ IMAGE_EXAMPLES = 2000
 TALLY: dict[str, Counter] = {}
 
 
-@pytest.fixture(scope="module", autouse=True)
+@pytest.fixture(autouse=True)
 def _write_stats():
+    """After each test (so an interrupted sweep keeps its counts), merge the tallies into the file."""
     yield
     target = os.environ.get("KESBRDF_FUZZ_STATS")
     if target:

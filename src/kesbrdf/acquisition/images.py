@@ -40,6 +40,11 @@ __all__ = [
 #: File name suffixes the reader understands.
 IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
 
+#: Largest frame accepted (pixels), checked from the file's header before decoding: a
+#: 100-megapixel camera frame.  A corrupt header declaring a huge size would otherwise
+#: make the decoder allocate gigabytes.
+MAX_IMAGE_PIXELS = 100_000_000
+
 _EXTRA = "install kesbrdf[images]"
 
 
@@ -95,12 +100,19 @@ def _as_hwc(array: np.ndarray, path: Path) -> np.ndarray:
 
 
 def _png_ihdr(path: Path) -> tuple[int, int]:
-    """(bit depth, colour type) from a PNG's IHDR chunk."""
+    """(bit depth, colour type) from a PNG's IHDR chunk; the declared size is checked."""
     with open(path, "rb") as fh:
         head = fh.read(33)
     if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n":
         raise FormatError(f"{where(path)}expected a PNG file, got bytes that do not start with the PNG signature")
+    width, height = int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
+    _check_pixels(path, width * height, f"{width}x{height}")
     return head[24], head[25]
+
+
+def _check_pixels(path: Path, pixels: int, size: str) -> None:
+    if pixels > MAX_IMAGE_PIXELS:
+        raise FormatError(f"{where(path)}expected a frame of at most {MAX_IMAGE_PIXELS} pixels, got {size}")
 
 
 def _read_png(path: Path) -> np.ndarray:
@@ -122,7 +134,12 @@ def _read_tiff(path: Path) -> np.ndarray:
         import tifffile
     except ImportError as exc:  # pragma: no cover
         raise ImportError(f"reading TIFF needs tifffile: {_EXTRA}") from exc
-    return np.asarray(tifffile.imread(path))
+    # only the first page: a frame is one page, and a corrupt file whose page chain loops
+    # would otherwise be walked without end (tifffile's series scan every page)
+    with tifffile.TiffFile(path) as tif:
+        page = tif.pages[0]
+        _check_pixels(path, int(page.imagewidth) * int(page.imagelength), f"{page.imagewidth}x{page.imagelength}")
+        return np.asarray(page.asarray())
 
 
 def _read_exr(path: Path) -> np.ndarray:
@@ -130,6 +147,9 @@ def _read_exr(path: Path) -> np.ndarray:
         import OpenEXR
     except ImportError as exc:  # pragma: no cover
         raise ImportError(f"reading OpenEXR needs the OpenEXR bindings: {_EXTRA}") from exc
+    with OpenEXR.File(str(path), header_only=True) as exr:
+        (x0, y0), (x1, y1) = exr.header()["dataWindow"]
+    _check_pixels(path, (int(x1) - int(x0) + 1) * (int(y1) - int(y0) + 1), f"{int(x1) - int(x0) + 1}x{int(y1) - int(y0) + 1}")
     with OpenEXR.File(str(path)) as exr:
         channels = exr.channels()
         if "RGB" in channels:
