@@ -69,7 +69,7 @@ def test_option_that_does_not_apply_is_an_error():
         kesbrdf.fit(m, interpolation="linear")
     with pytest.raises(KesbrdfError, match="banana_option \\(not an option of any kind\\)"):
         kesbrdf.fit(m, kind="kes", banana_option=1)
-    with pytest.raises(KesbrdfError, match="expected kind one of auto, kes, kes-halfdiff, scattered, got 'banana'"):
+    with pytest.raises(KesbrdfError, match="expected kind one of auto, kes, kes-halfdiff, fibre-prior, scattered, got 'banana'"):
         kesbrdf.fit(m, kind="banana")
 
 
@@ -122,3 +122,37 @@ def test_a_new_fitter_joins_auto_selection(monkeypatch):
     m = measure(WARD, protocol="dense", step_deg=10)
     _, report = kesbrdf.fit(m)
     assert report.fitter == "everything" and report.rows_used == len(m)
+
+
+def test_auto_compares_with_the_prior_on_held_out_orientations():
+    """Paper protocol: kes and the fibre prior are compared leave-one-orientation-out,
+    and the kept candidate is the one with the lowest held-out median NRMSE."""
+    m = measure(WARD)
+    model, report = kesbrdf.fit(m)
+    c = report.comparison
+    assert c is not None and {"kes", "prior", "prior+residual"} <= set(c["median_biases"])
+    med = c["median_biases"]
+    best = min(med, key=med.get)
+    assert c["kept"] == (best if med[best] < med["kes"] else "kes")
+    assert model.kind == ("kes" if c["kept"] == "kes" else "fibre-prior")
+    assert "kept" in report.comparison_summary()
+    # the comparison is skipped when asked, or when options name one kind
+    assert kesbrdf.fit(m, compare=False)[1].comparison is None
+    assert kesbrdf.fit(m, orientations=3)[1].comparison is None
+
+
+def test_auto_on_scattered_data_keeps_the_better_in_five_fold_validation():
+    from pathlib import Path
+
+    from kesbrdf.io.measurement_csv import read_measurement
+
+    allm = read_measurement(Path(__file__).parent / "data" / "curet_fabrics.csv")
+    k = [i for i, ch in enumerate(allm.channels) if "linen" in ch][0]
+    one = allm.subset(np.ones(len(allm), bool))
+    one.values, one.channels, one.uncertainty = allm.values[:, [k]], ("value",), None
+    model, report = kesbrdf.fit(one)
+    c = report.comparison
+    assert c["folds"] == 5 and set(c["median"]) == {"scattered", "fibre-prior"}
+    assert c["kept"] == min(c["median"], key=c["median"].get)
+    assert model.kind == ("fibre-prior" if c["kept"] == "fibre-prior" else "kes")
+    assert report.rows_used == report.rows_total == len(one)

@@ -79,8 +79,9 @@ def test_demo_quick(tmp_path):
 
 
 def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys):
-    """General-geometry data (CUReT corduroy) goes to the scattered fit; validate turns
-    the directions by the recorded warp offset."""
+    """General-geometry data (CUReT corduroy) goes to the scattered fit (asked for here:
+    auto would compare it with the fibre prior); validate turns the directions by the
+    recorded warp offset."""
     from pathlib import Path
 
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
@@ -93,7 +94,7 @@ def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys)
     one.uncertainty = None
     src = write_measurement(tmp_path / "corduroy.csv", one)
     model = tmp_path / "c.kes.json"
-    assert main(["fit", str(src), "-o", str(model)]) == 0
+    assert main(["fit", str(src), "-o", str(model), "--kind", "scattered"]) == 0
     assert "scattered fit" in capsys.readouterr().err
     js = tmp_path / "v.json"
     assert main(["validate", str(model), str(src), "--json", str(js)]) == 0

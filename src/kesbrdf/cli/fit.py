@@ -71,8 +71,6 @@ def run(args) -> int:
     m = read_measurement(args.measurement)
     for note in m.notes:
         stderr(f"note: {args.measurement}: {note}")
-    if args.kind == "auto" and not options and not args.strict and not args.no_compare:
-        stderr(f"{args.measurement}: comparing the kinds on held-out data (a few prior fits) ...")
     model, report = kesbrdf.fit(m, kind=args.kind, strict=args.strict, compare=not args.no_compare, **options)
     if report.comparison:
         stderr(f"{args.measurement}: {report.comparison_summary()}")

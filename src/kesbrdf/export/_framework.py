@@ -176,6 +176,8 @@ def export(model, fmt: str, out, **options) -> ExportResult:
     _check_options(fmt, module, options)
     model = _load_model(model)
     result = module.export(model, out, **options)
+    if not isinstance(result, ExportResult) and hasattr(result, "to_json"):
+        result = result.to_json()
     if isinstance(result, dict):
         result = _result_from_dict(fmt, result)
     if not isinstance(result, ExportResult):
