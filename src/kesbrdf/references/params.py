@@ -28,9 +28,13 @@ def _channels(lo, hi):
     return ("channels", lo, hi, False)
 
 
+#: Smallest lobe width accepted (Ward alpha, Sadeghi sigma_u, radians): below it the
+#: lobe's 1/alpha^2 overflows in double precision (alpha = 1e-301 evaluated to NaN).
+MIN_WIDTH = 1e-4
+
 _WARD = {
-    "alpha_x": _number(0.0, 1.0, lo_open=True),
-    "alpha_y": _number(0.0, 1.0, lo_open=True),
+    "alpha_x": _number(MIN_WIDTH, 1.0),
+    "alpha_y": _number(MIN_WIDTH, 1.0),
     "rho_d": _channels(0.0, 1.0),
     "rho_s": _channels(0.0, 1.0),
 }
@@ -38,7 +42,7 @@ _SADEGHI = {
     "n_samples": ("integer", 1, 1024, False),
     "sampling": ("choice", ("arclength", "control_points"), None, False),
     "reciprocal": ("boolean", None, None, False),
-    "sigma_u": _number(0.0, math.pi / 2, lo_open=True),
+    "sigma_u": _number(MIN_WIDTH, math.pi / 2),
 }
 
 #: Reference name -> {parameter: (type, lo, hi, lo_open)}; ranges are inclusive unless lo_open.
