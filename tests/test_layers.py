@@ -39,7 +39,7 @@ LAYERS = [
     ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior", "kesbrdf.prior_model"]),
     ("brdf", ["kesbrdf.brdf"]),
     ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare", "kesbrdf.selection",
-                    "kesbrdf.uncertainty"]),
+                    "kesbrdf.uncertainty", "kesbrdf.baselines"]),
     ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.planning"]),
     ("apps", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.cli", "kesbrdf.viewer", "kesbrdf.cloth",
               "kesbrdf.export", "kesbrdf.batch"]),
