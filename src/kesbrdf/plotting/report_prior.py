@@ -19,7 +19,6 @@ import html
 
 import numpy as np
 
-from kesbrdf.errors import KesbrdfError
 from kesbrdf.plotting.save import figure_bytes
 
 __all__ = ["figure_uncertainty", "sections_html", "comparison_table_html", "baselines_html"]
@@ -28,11 +27,13 @@ __all__ = ["figure_uncertainty", "sections_html", "comparison_table_html", "base
 LIGHTS_DEG = ((30.0, 90.0), (30.0, 45.0))
 
 
-def figure_uncertainty(model, lights_deg=LIGHTS_DEG, n: int = 81, channel: int = 0):
-    """Fig. 6 with σ: per light the model's log10 f_r and σ of ln f (equal-area disks).
+def figure_uncertainty(model, reference=None, lights_deg=LIGHTS_DEG, n: int = 81, channel: int = 0):
+    """Fig. 6 with σ: per light the model's log10 f_r, [the truth, log10(model/truth)], σ of ln f.
 
-    σ is :func:`kesbrdf.uncertainty.predict_sigma` (fit noise ⊕ candidate spread,
-    docs/prior.md §5); pixels outside the disk are blank.
+    Works for any model that carries a σ (:mod:`kesbrdf.uncertainty`; the paper's
+    Fig. 6 builder draws only the KES kinds).  σ is
+    :func:`kesbrdf.uncertainty.predict_sigma` (fit noise ⊕ candidate spread,
+    docs/prior.md §5).  Equal-area disks, x = warp, y = weft; pixels outside are blank.
     """
     from kesbrdf.geometry import spherical_to_cartesian
     from kesbrdf.plotting._mpl import new_figure
@@ -42,19 +43,31 @@ def figure_uncertainty(model, lights_deg=LIGHTS_DEG, n: int = 81, channel: int =
     grid = hemisphere_grid(n, "equal-area")
     wr = spherical_to_cartesian(grid["theta"], grid["phi"]).reshape(-1, 3)
     inside = grid["inside"].ravel()
-    fig = new_figure(figsize=(7.0, 3.2 * len(lights_deg)))
+    ncol = 4 if reference is not None else 2
+    fig = new_figure(figsize=(3.4 * ncol, 3.0 * len(lights_deg)))
     for row, (ti, pi) in enumerate(lights_deg):
         wi = np.broadcast_to(spherical_to_cartesian(np.radians(ti), np.radians(pi)), wr.shape)
         f, _, sl = predict_sigma(model, wi[inside], wr[inside])
-        maps = []
-        for vals in (np.log10(np.maximum(f[:, channel], 1e-12)), sl[:, channel]):
+        lf = np.log10(np.maximum(f[:, channel], 1e-12))
+        cols = [(lf, "model", "log10 f_r (1/sr)", "magma", None)]
+        if reference is not None:
+            t = np.asarray(reference(wi[inside], wr[inside]), float)
+            t = t[:, min(channel, t.shape[-1] - 1)]
+            lt = np.log10(np.maximum(t, 1e-12))
+            cols.append((lt, "truth", "log10 f_r (1/sr)", "magma", None))
+            cols.append((lf - lt, "log10(model / truth)", "decades", "coolwarm", (-1.0, 1.0)))
+        cols.append((sl[:, channel], "uncertainty σ of ln f", "σ of ln f", "viridis", None))
+        lo = min(np.nanmin(c[0]) for c in cols[: 2 if reference is not None else 1])
+        hi = max(np.nanmax(c[0]) for c in cols[: 2 if reference is not None else 1])
+        for col, (vals, title, label, cmap, lim) in enumerate(cols):
             img = np.full(inside.size, np.nan)
             img[inside] = vals
-            maps.append(img.reshape(n, n))
-        for col, (img, label, cmap) in enumerate(zip(maps, ("log10 f_r (1/sr)", "σ of ln f"), ("magma", "viridis"))):
-            ax = fig.add_subplot(len(lights_deg), 2, 2 * row + col + 1)
-            im = ax.imshow(img, origin="lower", extent=grid["extent"], cmap=cmap)
-            ax.set_title(f"{'model' if col == 0 else 'uncertainty'}, light θi={ti:g}°, φi={pi:g}°", fontsize=9)
+            if lim is None and cmap == "magma":
+                lim = (max(lo, hi - 4.0), hi)
+            ax = fig.add_subplot(len(lights_deg), ncol, ncol * row + col + 1)
+            im = ax.imshow(img.reshape(n, n), origin="lower", extent=grid["extent"], cmap=cmap,
+                           vmin=None if lim is None else lim[0], vmax=None if lim is None else lim[1])
+            ax.set_title(f"{title}\nlight θi={ti:g}°, φi={pi:g}°", fontsize=8)
             ax.set_axis_off()
             fig.colorbar(im, ax=ax, shrink=0.8, label=label)
     return fig
@@ -119,20 +132,17 @@ def sections_html(model=None, measurement=None, reference=None, plan=None, basel
     parts = []
     comparison = ((getattr(model, "diagnostics", None) or {}).get("fit_report") or {}).get("comparison")
     body = comparison_table_html(comparison) + baselines_html(baselines)
+    caption = ("Fig. 6 with uncertainty: the model, the truth, log10(model/truth) and σ of ln f "
+               "(fit noise ⊕ spread between candidates, docs/prior.md §5)")
     if model is not None and has_uncertainty(model):
-        body += _img(figure_uncertainty(model), "6-uncertainty",
-                     "Fig. 6 with uncertainty: the model and σ of ln f (fit noise ⊕ spread between candidates)", dpi)
+        body += "<h3>Uncertainty</h3>" + _img(figure_uncertainty(model, reference), "6-uncertainty", caption, dpi)
+    elif model is not None:
+        body += (f'<p class="note">The model (kind {html.escape(str(getattr(model, "kind", "?")))}) carries no σ: '
+                 "a KES table reproduces the samples exactly and its file holds no noise estimate"
+                 + ("; the fibre-prior model below shows one." if prior_model is not None else ".") + "</p>")
     if prior_model is not None and prior_model is not model:
-        from kesbrdf.plotting.figures import make_figure
-
-        body += "<h3>Prior-based model (fibre prior + KES residual)</h3>"
-        try:
-            body += _img(make_figure("6", model=prior_model, measurement=measurement, reference=reference),
-                         "6-prior", "Fig. 6 of the fibre-prior model (prior × KES residual)", dpi)
-        except KesbrdfError as exc:
-            body += f'<p class="note">Fig. 6 of the prior model not drawn: {html.escape(str(exc))}</p>'
-        body += _img(figure_uncertainty(prior_model), "6-prior-uncertainty",
-                     "The fibre-prior model and its σ of ln f over the hemisphere", dpi)
+        body += ("<h3>Prior-based model (fibre prior × KES residual)</h3>"
+                 + _img(figure_uncertainty(prior_model, reference), "6-prior-uncertainty", caption, dpi))
     if plan:
         from kesbrdf.plotting.planning import figure_plan
 
