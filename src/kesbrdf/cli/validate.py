@@ -34,7 +34,13 @@ def run(args) -> int:
     from kesbrdf.uncertainty import coverage, has_uncertainty, predict_sigma
 
     if has_uncertainty(model):
-        pred, _, sigma_log = predict_sigma(model, m.wi, m.wr, source=args.model)
+        wi, wr = m.wi, m.wr
+        warp = getattr(model, "sample_frame_warp", 0.0)
+        if warp:  # fitted in a sample frame: evaluate as validate() does
+            from kesbrdf.scattered import to_fabric_frame
+
+            wi, wr = to_fabric_frame(wi, warp), to_fabric_frame(wr, warp)
+        pred, _, sigma_log = predict_sigma(model, wi, wr, source=args.model)
         if pred.shape == m.values.shape:
             cov = coverage(pred, sigma_log, m.values)
             result["uncertainty"] = cov
