@@ -87,29 +87,35 @@ def compare_models(m, reference, models: dict, baselines: dict, default: str,
 
 
 def verdicts(result: dict) -> list[str]:
-    """One line per (case, baseline): does the default beat it on RMSE, and if not, why.
+    """One line per case: does the default beat each baseline on RMSE, and if not, why.
 
     "Beats" means a strictly lower RMSE (1/sr) than the baseline on that case.  The
     reason of a loss is where the default's squared error lies: the highlight (the
-    brightest 5 % of truths) or grazing angles (θ_i or θ_r ≥ 70°), whichever holds more of it.
+    brightest 5 % of truths) or grazing angles (θ_i or θ_r ≥ 70°), whichever holds more
+    of it; the line also names the other models that do beat every baseline there.
     """
     lines = []
     d = result["default"]
+    tiny = np.finfo(float).tiny
     for case, row in result["cases"].items():
-        for base in result.get("baselines", BASELINES):
-            if base not in row:
-                continue
-            a, b = row[d]["rmse"], row[base]["rmse"]
-            ratio = a / max(b, np.finfo(float).tiny)
-            head = f"{case}: {d} RMSE {a:.4g} vs {base} {b:.4g} (ratio {ratio:.2f})"
-            if a < b:
-                lines.append(f"{head}: beats {base}")
-                continue
-            w = result.get("where", {}).get(case, {})
-            hs, rs = w.get("highlight_share", float("nan")), w.get("rim_share", float("nan"))
-            if hs >= rs:
-                why = f"{hs:.0%} of its squared error is in the highlight (brightest 5% of truths), the narrow streak that {base} interpolates directly from the measured peaks"
-            else:
-                why = f"{rs:.0%} of its squared error is at grazing angles (theta_i or theta_r >= {RIM_THETA_DEG:g} deg), far from the measured samples near the specular line"
-            lines.append(f"{head}: does not beat {base}; {why}")
+        bases = [b for b in result.get("baselines", BASELINES) if b in row]
+        a = row[d]["rmse"]
+        won = [b for b in bases if a < row[b]["rmse"]]
+        lost = [b for b in bases if b not in won]
+        parts = [f"{b} {row[b]['rmse']:.4g} (ratio {a / max(row[b]['rmse'], tiny):.2f})" for b in bases]
+        head = f"{case}: {d} RMSE {a:.4g} vs " + ", ".join(parts)
+        if not lost:
+            lines.append(f"{head}: beats {' and '.join(bases)}")
+            continue
+        w = result.get("where", {}).get(case, {})
+        hs, rs = w.get("highlight_share", float("nan")), w.get("rim_share", float("nan"))
+        if hs >= rs:
+            why = f"{hs:.0%} of its squared error is in the highlight (brightest 5% of truths), the narrow streak the baselines interpolate directly from the measured peaks"
+        else:
+            why = f"{rs:.0%} of its squared error is at grazing angles (theta_i or theta_r >= {RIM_THETA_DEG:g} deg), far from the measured samples near the specular line"
+        better = [f"{n} {r['rmse']:.4g}" for n, r in row.items()
+                  if n != d and n not in bases and all(r["rmse"] < row[b]["rmse"] for b in bases)]
+        tail = f"; beating all baselines here: {', '.join(better)}" if better else ""
+        verdict = f"beats {' and '.join(won)} but does not beat {' or '.join(lost)}" if won else f"does not beat {' or '.join(lost)}"
+        lines.append(f"{head}: {verdict}; {why}{tail}")
     return lines
