@@ -76,6 +76,16 @@ def test_demo_quick(tmp_path):
     v = json.loads((out / "validation.json").read_text())
     assert v["round_trip"]["metrics"]["all"]["rmse"] < 1e-9
     assert (out / "model.kes.json").exists()
+    # issue 9: the default model against the baselines, one verdict per case, consistent
+    # with the stored RMSEs; the report carries the comparison, uncertainty and plan
+    dvb = v["default_vs_baselines"]
+    assert len(dvb["verdicts"]) == len(dvb["cases"]) == 3
+    for line, (case, row) in zip(dvb["verdicts"], dvb["cases"].items()):
+        wins = all(row[dvb["default"]]["rmse"] < row[b]["rmse"] for b in ("linear", "nearest"))
+        assert line.startswith(case) and (line.endswith("beats linear and nearest") == wins), line
+    html = (out / "report.html").read_text()
+    for anchor in ("<h3>Model comparison</h3>", 'id="fig-plan"', 'id="fig-6-prior-uncertainty"'):
+        assert anchor in html
 
 
 def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys):

@@ -131,6 +131,14 @@ def run(args) -> int:
         for base, cases in summary["reference"]["ratio_kes_to"].items():
             text = ", ".join(f"{k}: {v:.2f}" for k, v in cases.items())
             stderr(f"    RMSE ratio KES / {base}: {text}")
+    prior_part, plan_result = {}, None
+    if reference is not None:
+        from kesbrdf.cli import _demo_prior
+
+        prior_part = _demo_prior.default_vs_baselines(m, reference, model, report, say)
+        summary["default_vs_baselines"] = {"verdicts": prior_part["verdicts"], **prior_part["table"]}
+        write_text(out / "validation.json", json.dumps(summary, indent=1) + "\n")
+        plan_result = _demo_prior.small_plan(reference, say)
 
     comparisons = [] if args.quick else _comparisons(out, reference, say)
 
@@ -149,6 +157,9 @@ def run(args) -> int:
             title="kesbrdf demo: virtual black satin",
             figure_dir=out / "figures",
             comparisons=comparisons,
+            plan=plan_result,
+            baselines=summary.get("default_vs_baselines"),
+            prior_model=prior_part.get("prior_model"),
         )
     else:
         say("figures + report skipped (install kesbrdf[plot])")

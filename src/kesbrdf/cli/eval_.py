@@ -20,6 +20,8 @@ def add_arguments(p):
     p.add_argument("--mapping", choices=("paper", "deviation", "halfvector", "halfdiff"), default=None,
                    help="direction mapping (default: the model kind's own, deviation for kes); "
                    "one the model's kind lacks is an error")
+    p.add_argument("--uncertainty", action="store_true",
+                   help="add a sigma column per channel (1/sr; fibre-prior models only: fit noise + candidate spread)")
 
 
 def run(args) -> int:
@@ -35,12 +37,22 @@ def run(args) -> int:
     rad = np.radians(pairs)
     wi = spherical_to_cartesian(rad[:, 0], rad[:, 1])
     wr = spherical_to_cartesian(rad[:, 2], rad[:, 3])
-    f = evaluate(model, wi, wr, mapping)
+    sigma = None
+    if args.uncertainty:
+        from kesbrdf.uncertainty import predict_sigma
+
+        f, sigma, _ = predict_sigma(model, wi, wr, source=args.model)
+    else:
+        f = evaluate(model, wi, wr, mapping)
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(list(PAIR_COLUMNS) + list(model.channels))
+    header = list(PAIR_COLUMNS) + list(model.channels)
+    if sigma is not None:
+        header += [f"sigma_{c}" for c in model.channels]
+        f = np.concatenate([f, sigma], axis=1)
+    w.writerow(header)
     for p, v in zip(pairs, f):
         w.writerow([repr(float(x)) for x in p] + [repr(float(x)) for x in v])
     write_text(args.output, buf.getvalue())
-    stderr(f"wrote {len(pairs)} BRDF values ({mapping} mapping) to {args.output}")
+    stderr(f"wrote {len(pairs)} BRDF values ({mapping} mapping{', with sigma' if sigma is not None else ''}) to {args.output}")
     return 0

@@ -31,6 +31,24 @@ def run(args) -> int:
     args.mapping = result["mapping"]
     result.update({"model": args.model, "measurement": args.measurement, "measurement_sha256": m.sha256})
     print_metrics(result, title=f"{args.model} vs {args.measurement} ({args.mapping})")
+    from kesbrdf.uncertainty import coverage, has_uncertainty, predict_sigma
+
+    if has_uncertainty(model):
+        wi, wr = m.wi, m.wr
+        warp = getattr(model, "sample_frame_warp", 0.0)
+        if warp:  # fitted in a sample frame: evaluate as validate() does
+            from kesbrdf.scattered import to_fabric_frame
+
+            wi, wr = to_fabric_frame(wi, warp), to_fabric_frame(wr, warp)
+        pred, _, sigma_log = predict_sigma(model, wi, wr, source=args.model)
+        if pred.shape == m.values.shape:
+            cov = coverage(pred, sigma_log, m.values)
+            result["uncertainty"] = cov
+            print(f"uncertainty: {cov['within_1sigma']:.0%} of the samples within 1 sigma, "
+                  f"{cov['within_2sigma']:.0%} within 2 sigma (Gaussian: 68%, 95%); "
+                  f"median sigma of ln f {cov['median_sigma_log']:.3f}")
+    else:
+        print(f"uncertainty: none (kind {model.kind!r} carries no sigma; only fibre-prior models do)")
     if args.json_out:
         write_text(args.json_out, json.dumps(result, indent=1) + "\n")
         stderr(f"wrote {args.json_out}")

@@ -372,6 +372,9 @@ def build_report(
     dpi: int = 90,
     figure_options: dict | None = None,
     comparisons=None,
+    plan=None,
+    baselines=None,
+    prior_model=None,
 ) -> str:
     """The report as one HTML string (see :func:`write_report` for the parameters)."""
     from kesbrdf.plotting.figures import make_figure
@@ -419,6 +422,9 @@ def build_report(
         if figure_dir is not None:
             save_figure(fig, Path(figure_dir) / f"fig{name}.{figure_format}")
 
+    from kesbrdf.plotting.report_prior import sections_html
+
+    parts.append(sections_html(model, measurement, reference, plan, baselines, prior_model, dpi))
     parts.append(_comparisons_html(comparisons))
 
     # -- metrics and diagnostics
@@ -473,6 +479,9 @@ def write_report(
     dpi: int = 90,
     figure_options: dict | None = None,
     comparisons=None,
+    plan=None,
+    baselines=None,
+    prior_model=None,
 ) -> Path:
     """Write one self-contained HTML report atomically.
 
@@ -502,6 +511,15 @@ def write_report(
     comparisons : sequence of dict, optional
         Reference-vs-model render panels to embed (``panel`` path + numbers, as returned
         by :func:`kesbrdf.render.compare.compare_render`); missing panels are skipped.
+    plan : dict, optional
+        :meth:`kesbrdf.planning.PlanResult.to_dict`: drawn as the protocol-planning plot.
+    baselines : dict, optional
+        :func:`kesbrdf.baselines.compare_models` (+ ``verdicts``): the default-vs-baselines table.
+    prior_model : FibrePriorModel, optional
+        A fibre-prior model shown beside ``model``: its Fig. 6 and uncertainty map.
+        The model comparison table (``model.diagnostics["fit_report"]["comparison"]``)
+        and, for a model carrying σ, its uncertainty map are added automatically
+        (:mod:`kesbrdf.plotting.report_prior`).
 
     Returns
     -------
@@ -509,7 +527,7 @@ def write_report(
     """
     text = build_report(
         model, measurement, reference, metrics, diagnostics, title, figures, figure_dir,
-        figure_format, dpi, figure_options, comparisons,
+        figure_format, dpi, figure_options, comparisons, plan, baselines, prior_model,
     )
     return write_text(path, text)
 

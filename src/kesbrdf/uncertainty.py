@@ -1,0 +1,86 @@
+"""Per-prediction uncertainty of a model file, and its coverage of held-out truths.
+
+Only the ``fibre-prior`` kind carries a σ: its fit has a Laplace covariance and it has
+candidate models (the pure prior, prior + residual) whose spread is the model term
+(:func:`kesbrdf.prior_model.predict_with_uncertainty`, docs/prior.md §5).  A ``kes`` /
+``kes-halfdiff`` table interpolates the measured samples exactly; the file holds no
+noise estimate and no second candidate, so any σ computed from it alone would be
+invented.  Asking for one is a :class:`~kesbrdf.errors.ModelError` that says so
+(decision recorded in docs/prior.md, "Uncertainty of other kinds").
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from kesbrdf.errors import ModelError
+
+__all__ = ["has_uncertainty", "predict_sigma", "coverage", "SIGMA_KINDS"]
+
+#: Model kinds that carry a per-prediction σ.
+SIGMA_KINDS = ("fibre-prior",)
+
+
+def has_uncertainty(model) -> bool:
+    """True when ``model`` carries a per-prediction σ (see :data:`SIGMA_KINDS`)."""
+    return getattr(model, "kind", None) in SIGMA_KINDS
+
+
+def predict_sigma(model, wi, wr, source: str = "model"):
+    r"""f_r and its σ at direction pairs.
+
+    σ of ln f combines the fit noise propagated through the Laplace covariance and the
+    spread between the candidates (the model and its pure prior), docs/prior.md §5:
+
+    .. math:: \sigma_{\ln f}^2 = g^\top\Sigma_\theta g + \tfrac1K\sum_k(\ln f_k-\ln f)^2
+
+    Parameters
+    ----------
+    model : FibrePriorModel
+    wi, wr : array_like (N, 3)
+        Unit directions to the light and to the viewer (fabric frame).
+    source : str
+        Where the model came from, for the error message.
+
+    Returns
+    -------
+    f, sigma, sigma_log : ndarray (N, C)
+        Prediction (1/sr), σ in 1/sr (f·σ_ln f) and σ of ln f.
+
+    Raises
+    ------
+    ModelError
+        When the model's kind carries no σ.
+    """
+    if not has_uncertainty(model):
+        raise ModelError(
+            f"{source}: kind {getattr(model, 'kind', '?')!r} carries no uncertainty; expected one of "
+            f"{', '.join(SIGMA_KINDS)} (fit with --kind fibre-prior; a KES table interpolates the samples "
+            "exactly and the file holds no noise estimate)"
+        )
+    from kesbrdf.prior_model import predict_with_uncertainty
+
+    wi = np.asarray(wi, float).reshape(-1, 3)
+    wr = np.asarray(wr, float).reshape(-1, 3)
+    f, sigma, sigma_log = predict_with_uncertainty(model, wi, wr)
+    f = np.where(np.isfinite(f), f, 0.0)
+    sigma = np.where(np.isfinite(sigma), np.maximum(sigma, 0.0), 0.0)
+    return f, sigma, sigma_log
+
+
+def coverage(pred, sigma_log, truth) -> dict:
+    r"""Fraction of truths within 1σ and 2σ of the prediction, in log space.
+
+    z = |ln(t + ε) − ln(p + ε)| / σ_ln f with ε = 10⁻⁴·max t (the same floor as
+    :func:`kesbrdf.prior_model.calibration`).  A calibrated Gaussian σ gives 0.68 and
+    0.95.
+
+    Returns ``{"within_1sigma", "within_2sigma", "median_sigma_log", "n"}``.
+    """
+    p = np.asarray(pred, float)
+    t = np.asarray(truth, float).reshape(p.shape)
+    sl = np.asarray(sigma_log, float).reshape(p.shape)
+    eps = max(float(np.max(t)), 1e-300) * 1e-4
+    z = np.abs(np.log(np.maximum(t, 0) + eps) - np.log(np.maximum(p, 0) + eps)) / np.maximum(sl, 1e-12)
+    return {"within_1sigma": float(np.mean(z <= 1)), "within_2sigma": float(np.mean(z <= 2)),
+            "median_sigma_log": float(np.median(sl)), "n": int(z.size)}
