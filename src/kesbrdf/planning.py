@@ -178,10 +178,14 @@ def simulate(truth, groups, noise: float = 0.0, rng=None) -> Measurement:
 
 
 def default_fit(m: Measurement):
-    """The fit a user gets by default: :func:`kesbrdf.fit` with ``kind="auto"``."""
+    """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row.
+
+    Without the held-out comparison with the prior (``compare=False``): the planner fits
+    every candidate protocol many times, and a comparison costs a few prior fits each.
+    """
     from kesbrdf.fitting import fit
 
-    model, _report = fit(m)
+    model, _report = fit(m, compare=False)
     return model
 
 

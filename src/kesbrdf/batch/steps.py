@@ -124,29 +124,21 @@ def make_fabric_reference(name: str | None, params: dict | None = None):
 
 
 def fit_model(m, params: dict):
-    """Fit one measurement with the fit options of a catalogue row.
+    """Fit one measurement with the fit options of a catalogue row: :func:`kesbrdf.fit`.
 
-    The one place the batch fits; at merge it becomes ``kesbrdf.fit(m, kind=...)``.
-    ``kind="auto"``: scattered data (no in-plane rows) gets the scattered least-squares
-    fit, in-plane data the paper's table.
+    ``kind`` (default ``auto``: the kind that uses every row, docs/models.md) and the
+    options the row gives (orientations, fallback, body, interpolation, warp_deg) go to
+    :func:`kesbrdf.fit`; options left empty keep the library defaults.  The held-out
+    comparison with the woven-cloth prior is off in batches (``compare=False``: it costs a
+    few prior fits per fabric); a catalogue that wants the prior names ``kind=fibre-prior``.
     """
+    import kesbrdf
+
     kind = params.get("kind") or "auto"
-    body = params.get("body") or "auto"
-    if kind == "auto":
-        kind = "kes" if m.is_in_plane.any() else "scattered"
-    if kind == "scattered":
-        from kesbrdf.scattered import fit_scattered
-
-        return fit_scattered(m, warp_deg=params.get("warp_deg"), body=body)
-    if kind == "kes-halfdiff":
-        from kesbrdf.halfdiff import fit_halfdiff
-
-        return fit_halfdiff(m, orientations=params.get("orientations"), fallback=params.get("fallback") or "log",
-                            body=body)
-    from kesbrdf.model import fit
-
-    return fit(m, orientations=params.get("orientations"), fallback=params.get("fallback") or "log", body=body,
-               interpolation=params.get("interpolation") or "kes")
+    options = {k: params[k] for k in ("orientations", "fallback", "body", "interpolation", "warp_deg")
+               if params.get(k) not in (None, "")}
+    model, _report = kesbrdf.fit(m, kind=kind, compare=False, **options)
+    return model
 
 
 def _finite(x):
