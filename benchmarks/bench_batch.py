@@ -35,6 +35,10 @@ from pathlib import Path
 N_FABRICS = 192
 REPEATS = 3
 STEPS = ("fit", "validate", "export")
+#: Export formats measured: the BRDF Explorer file (a baked table). The analytic fits
+#: (glTF, MaterialX, USD: 20-50 s each) and the RGL tensors (3-6 s, 22-44 MB) would make
+#: this a benchmark of those formats; bench_export and bench_fits time them.
+SETTINGS = {"export": {"formats": ["brdf-explorer"]}}
 
 
 def _cpu() -> float:
@@ -53,7 +57,8 @@ def run() -> dict:
 
     root = Path(tempfile.mkdtemp(prefix="kesbrdf-bench-batch-"))
     fabrics = read_catalog(simulate_library(N_FABRICS, root / "lib", seed=1, broken=0, images_every=0))
-    res = {"n_fabrics": N_FABRICS, "steps": list(STEPS), "cpus": os.cpu_count(), "repeats": REPEATS}
+    res = {"n_fabrics": N_FABRICS, "steps": list(STEPS), "export_formats": SETTINGS["export"]["formats"],
+           "cpus": os.cpu_count(), "repeats": REPEATS}
     clients, clusters = {}, []
     try:
         for n in (1, 2):
@@ -62,9 +67,9 @@ def run() -> dict:
             clusters.append(cl)
             clients[n] = Client(cl)
             res[f"dask_{n}_startup_s"] = time.perf_counter() - t0
-        run_batch(fabrics[:8], root / "warm0", steps=STEPS, workers=0, write_summary=False)
+        run_batch(fabrics[:8], root / "warm0", steps=STEPS, workers=0, write_summary=False, settings=SETTINGS)
         for n, c in clients.items():
-            run_batch(fabrics[:8], root / f"warm{n}", steps=STEPS, scheduler=c, write_summary=False)
+            run_batch(fabrics[:8], root / f"warm{n}", steps=STEPS, scheduler=c, write_summary=False, settings=SETTINGS)
         best = {"serial": (float("inf"), 0.0), 1: (float("inf"), 0.0), 2: (float("inf"), 0.0)}
         cpu = {"serial": [], 1: [], 2: []}
         for k in range(REPEATS):
@@ -74,9 +79,9 @@ def run() -> dict:
                 c0 = _cpu()
                 t0 = time.perf_counter()
                 if which == "serial":
-                    r = run_batch(fabrics, out, steps=STEPS, workers=0, write_summary=False)
+                    r = run_batch(fabrics, out, steps=STEPS, workers=0, write_summary=False, settings=SETTINGS)
                 else:
-                    r = run_batch(fabrics, out, steps=STEPS, scheduler=clients[which], write_summary=False)
+                    r = run_batch(fabrics, out, steps=STEPS, scheduler=clients[which], write_summary=False, settings=SETTINGS)
                 wall = time.perf_counter() - t0
                 driver = _cpu() - c0
                 w1 = clients[which].run(_cpu) if which != "serial" else {}
