@@ -68,7 +68,7 @@ from kesbrdf.errors import ModelError, validate_choice, where
 from kesbrdf.kinds import require_kind
 from kesbrdf.render import sampling as _sampling
 
-__all__ = ["KesBSDF", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
+__all__ = ["FabricBSDF", "KesBSDF", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
 
 MAPPINGS = ("deviation", "halfvector")
 #: Model kinds the plugin evaluates (the ``kes`` table).
@@ -138,7 +138,67 @@ def _prop(props, name, default=None):
     return props[name] if name in props else default
 
 
-class KesBSDF(mi.BSDF):
+class FabricBSDF(mi.BSDF):
+    """What every kesbrdf Mitsuba BSDF shares: the fabric frame, two-sided mirroring,
+    ``eval``/``pdf``/``sample`` around a subclass's ``f_r(wi, wr, active)`` and ``sampler``
+    (:mod:`kesbrdf.render.sampling`).  Subclasses set ``two_sided``, ``sampler`` and ``f_r``.
+
+    Mitsuba's ``si.wi`` points to the camera (the paper's ω_r) and ``wo`` to the light (ω_i).
+    """
+
+    def _orient(self, si, wo):
+        """Fabric-frame (ω_r, ω_i) with the back side mirrored when two-sided."""
+        wr = mi.Vector3f(si.wi)
+        wi = mi.Vector3f(wo)
+        if self.two_sided:
+            back = wr.z < 0.0
+            wr.z = dr.select(back, -wr.z, wr.z)
+            wi.z = dr.select(back, -wi.z, wi.z)
+        return wr, wi
+
+    def eval(self, ctx, si, wo, active=True):
+        wr, wi = self._orient(si, wo)
+        f = self.f_r(wi, wr, active)
+        return dr.select(active, f * dr.maximum(wi.z, 0.0), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        wr, wi = self._orient(si, wo)
+        ok = active & (wr.z > 0.0) & (wi.z > 0.0)
+        return dr.select(ok, self.sampler.pdf(wr, wi), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        wr = mi.Vector3f(si.wi)
+        back = wr.z < 0.0
+        if self.two_sided:
+            wr.z = dr.select(back, -wr.z, wr.z)
+        wi, pdf, from_lobe = self.sampler.sample(wr, sample1, sample2)
+        ok = active & (wr.z > 0.0) & (wi.z > 0.0) & (pdf > 0.0)
+        f = self.f_r(wi, wr, ok) * wi.z
+        weight = dr.select(ok, f / dr.maximum(pdf, 1e-30), 0.0)
+        wo = mi.Vector3f(wi)
+        if self.two_sided:
+            wo.z = dr.select(back, -wo.z, wo.z)
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = wo
+        bs.pdf = dr.select(ok, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = dr.select(
+            from_lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+        )
+        bs.sampled_component = dr.select(from_lobe, mi.UInt32(0), mi.UInt32(1))
+        return bs, weight
+
+    def traverse(self, callback):
+        pass
+
+    def parameters_changed(self, keys):
+        pass
+
+
+class KesBSDF(FabricBSDF):
     """Mitsuba BSDF evaluating and sampling a kesbrdf model (module docstring)."""
 
     def __init__(self, props):
@@ -260,57 +320,6 @@ class KesBSDF(mi.BSDF):
         norm = dr.rsqrt(dr.maximum(cos_i * cos_r, 1e-20))
         f = self.body + q * norm
         return dr.select(above, f, 0.0)
-
-    def _orient(self, si, wo):
-        """Fabric-frame (ω_r, ω_i) with the back side mirrored when two-sided."""
-        wr = mi.Vector3f(si.wi)
-        wi = mi.Vector3f(wo)
-        if self.two_sided:
-            back = wr.z < 0.0
-            wr.z = dr.select(back, -wr.z, wr.z)
-            wi.z = dr.select(back, -wi.z, wi.z)
-        return wr, wi
-
-    def eval(self, ctx, si, wo, active=True):
-        wr, wi = self._orient(si, wo)
-        f = self.f_r(wi, wr, active)
-        return dr.select(active, f * dr.maximum(wi.z, 0.0), 0.0)
-
-    def pdf(self, ctx, si, wo, active=True):
-        wr, wi = self._orient(si, wo)
-        ok = active & (wr.z > 0.0) & (wi.z > 0.0)
-        return dr.select(ok, self.sampler.pdf(wr, wi), 0.0)
-
-    def eval_pdf(self, ctx, si, wo, active=True):
-        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
-
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        wr = mi.Vector3f(si.wi)
-        back = wr.z < 0.0
-        if self.two_sided:
-            wr.z = dr.select(back, -wr.z, wr.z)
-        wi, pdf, from_lobe = self.sampler.sample(wr, sample1, sample2)
-        ok = active & (wr.z > 0.0) & (wi.z > 0.0) & (pdf > 0.0)
-        f = self.f_r(wi, wr, ok) * wi.z
-        weight = dr.select(ok, f / dr.maximum(pdf, 1e-30), 0.0)
-        wo = mi.Vector3f(wi)
-        if self.two_sided:
-            wo.z = dr.select(back, -wo.z, wo.z)
-        bs = dr.zeros(mi.BSDFSample3f)
-        bs.wo = wo
-        bs.pdf = dr.select(ok, pdf, 0.0)
-        bs.eta = 1.0
-        bs.sampled_type = dr.select(
-            from_lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-        )
-        bs.sampled_component = dr.select(from_lobe, mi.UInt32(0), mi.UInt32(1))
-        return bs, weight
-
-    def traverse(self, callback):
-        pass
-
-    def parameters_changed(self, keys):
-        pass
 
     def to_string(self):
         return (

@@ -56,6 +56,7 @@ import mitsuba as mi
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.references.registry import REFERENCES, RGL_FILES, make_reference, rgl_path
 from kesbrdf.render import sampling as _sampling
+from kesbrdf.render.bsdf import FabricBSDF
 
 __all__ = [
     "REFERENCE_NAMES",
@@ -272,7 +273,7 @@ def proposal_model(ref):
     return fit(measure(ref, protocol="paper"), fallback="log")
 
 
-class ReferenceBSDF(mi.BSDF):
+class ReferenceBSDF(FabricBSDF):
     """Mitsuba BSDF evaluating an analytic reference BRDF (module docstring)."""
 
     def __init__(self, props):
@@ -302,56 +303,6 @@ class ReferenceBSDF(mi.BSDF):
         """f_r (1/sr) for light ω_i and viewer ω_r (fabric frame); 0 below the horizon."""
         above = (wi.z > 0.0) & (wr.z > 0.0) & active
         return dr.select(above, self._f(wi, wr), 0.0)
-
-    def _orient(self, si, wo):
-        wr = mi.Vector3f(si.wi)
-        wi = mi.Vector3f(wo)
-        if self.two_sided:
-            back = wr.z < 0.0
-            wr.z = dr.select(back, -wr.z, wr.z)
-            wi.z = dr.select(back, -wi.z, wi.z)
-        return wr, wi
-
-    def eval(self, ctx, si, wo, active=True):
-        wr, wi = self._orient(si, wo)
-        f = self.f_r(wi, wr, active)
-        return dr.select(active, f * dr.maximum(wi.z, 0.0), 0.0)
-
-    def pdf(self, ctx, si, wo, active=True):
-        wr, wi = self._orient(si, wo)
-        ok = active & (wr.z > 0.0) & (wi.z > 0.0)
-        return dr.select(ok, self.sampler.pdf(wr, wi), 0.0)
-
-    def eval_pdf(self, ctx, si, wo, active=True):
-        return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
-
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        wr = mi.Vector3f(si.wi)
-        back = wr.z < 0.0
-        if self.two_sided:
-            wr.z = dr.select(back, -wr.z, wr.z)
-        wi, pdf, from_lobe = self.sampler.sample(wr, sample1, sample2)
-        ok = active & (wr.z > 0.0) & (wi.z > 0.0) & (pdf > 0.0)
-        f = self.f_r(wi, wr, ok) * wi.z
-        weight = dr.select(ok, f / dr.maximum(pdf, 1e-30), 0.0)
-        wo = mi.Vector3f(wi)
-        if self.two_sided:
-            wo.z = dr.select(back, -wo.z, wo.z)
-        bs = dr.zeros(mi.BSDFSample3f)
-        bs.wo = wo
-        bs.pdf = dr.select(ok, pdf, 0.0)
-        bs.eta = 1.0
-        bs.sampled_type = dr.select(
-            from_lobe, mi.UInt32(+mi.BSDFFlags.GlossyReflection), mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-        )
-        bs.sampled_component = dr.select(from_lobe, mi.UInt32(0), mi.UInt32(1))
-        return bs, weight
-
-    def traverse(self, callback):
-        pass
-
-    def parameters_changed(self, keys):
-        pass
 
     def to_string(self):
         return f"ReferenceBSDF[reference={self.name!r}, two_sided={self.two_sided}, sampling={self.sampling!r}]"
