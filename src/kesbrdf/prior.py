@@ -190,6 +190,34 @@ def _cos_phi(wx, wy, wz, rx, ry, rz, tx, ty, tz):
         return np.clip(np.where(den > 1e-300, num / np.maximum(den, 1e-300), 1.0), -1.0, 1.0)
 
 
+def _cos_phi_derivative(w, r, t, dt):
+    """d cos φ of :func:`_cos_phi` for a change dt of t (w, r, t, dt: 3-tuples of arrays).
+
+    p_w = w − (w·t)t, dp_w = −(w·dt)t − (w·t)dt, cos φ = p_i·p_r/(|p_i||p_r|) and
+    d cos φ = (dp_i·p_r + p_i·dp_r)/(|p_i||p_r|) − cos φ (p_i·dp_i/|p_i|² + p_r·dp_r/|p_r|²);
+    zero where cos φ is clipped or undefined.
+    """
+    dot = lambda a, b: a[0] * b[0] + a[1] * b[1] + a[2] * b[2]  # noqa: E731
+
+    def proj(v):
+        d, dd = dot(v, t), dot(v, dt)
+        return tuple(v[k] - d * t[k] for k in range(3)), tuple(-dd * t[k] - d * dt[k] for k in range(3))
+
+    (pi, dpi), (pr, dpr) = proj(w), proj(r)
+    ii, rr, num = dot(pi, pi), dot(pr, pr), dot(pi, pr)
+    den = np.sqrt(ii * rr)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c = num / den
+        d = (dot(dpi, pr) + dot(pi, dpr)) / den - c * (dot(pi, dpi) / ii + dot(pr, dpr) / rr)
+    return np.where((den > 1e-300) & (np.abs(c) < 1.0), d, 0.0)
+
+
+def _lobe_cos_derivative(cos_phi, rho):
+    """∂N/∂cos φ = 2ρ(1 − ρ)²/(1 − 2ρ cos φ + ρ²)²."""
+    q = 1.0 - 2.0 * rho * cos_phi + rho * rho
+    return 2.0 * rho * (1.0 - rho) ** 2 / (q * q)
+
+
 def _profile(u, lo, hi, log_s, c2):
     s = np.exp(log_s)
     return _sigmoid((u - lo) / s) * _sigmoid((hi - u) / s) * np.exp(np.clip(c2 * u * u, -700, 50))
@@ -240,10 +268,13 @@ def _filament_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):
 
 
 def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
-    """ψ-dependent part of a staple family: (G, cos φ), each (K, N, U), for K distinct (frame, ψ).
+    """ψ-dependent part of a staple family: (G, cos φ, ∂G/∂ψ, ∂cos φ/∂ψ), each (K, N, U).
 
-    G = [valid] · A_S(n·ωi', n·ωr') / (|n·h'| |ωi+ωr| |sin ψ|), so that
-    S = Σ_u P(u) Δu N(φ) G.
+    For K distinct (frame, ψ). G = [valid] · A_S(n·ωi', n·ωr') / (|n·h'| |ωi+ωr| |sin ψ|),
+    so that S = Σ_u P(u) Δu N(φ) G.  The ψ-derivatives follow v*(u):
+    ∂D/∂ψ = −D/(sin ψ cos ψ), ∂v*/∂ψ = −(∂D/∂ψ)/√(1 − D²), n' = ∂n/∂v · ∂v*/∂ψ, and
+    t = t(v*, ψ) through both arguments; the validity mask is held fixed (its edges are
+    jumps of S, not part of the derivative).
     """
     u = _U_NODES
     su, cu = np.sin(u), np.cos(u)
@@ -265,10 +296,27 @@ def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
     tx = -cv * sp
     ty = cu * cp + su * sv * sp
     tz = -su * cp + cu * sv * sp
-    cphi = _cos_phi(e(ix), e(iy), e(iz), e(rx), e(ry), e(rz), tx, ty, tz)
+    wi_, wr_ = (e(ix), e(iy), e(iz)), (e(rx), e(ry), e(rz))
+    cphi = _cos_phi(*wi_, *wr_, tx, ty, tz)
+    AS = _seeliger(ci, cr)
+    nhf = np.maximum(nh, 1e-9)
+    scale = 1.0 / (e(norm_sum) * np.abs(sp))
     with np.errstate(invalid="ignore", divide="ignore"):
-        G = np.where(ok, _seeliger(ci, cr) / np.maximum(nh, 1e-9), 0.0) / (e(norm_sum) * np.abs(sp))
-    return G, cphi
+        G = np.where(ok, AS / nhf, 0.0) * scale
+        dv = np.where(ok, D / (np.sqrt(np.maximum(1.0 - D * D, 1e-300)) * sp * cp), 0.0)
+        dnx, dny, dnz = cv * dv, -su * sv * dv, -cu * sv * dv
+        dci = dnx * e(ix) + dny * e(iy) + dnz * e(iz)
+        dcr = dnx * e(rx) + dny * e(ry) + dnz * e(rz)
+        nh_signed = nx * e(hx) + ny * e(hy) + nz * e(hz)
+        dnh = np.where(nh > 1e-9, np.sign(nh_signed) * (dnx * e(hx) + dny * e(hy) + dnz * e(hz)), 0.0)
+        pos = (ci > 0) & (cr > 0)
+        dAS = np.where(pos, (cr * cr * dci + ci * ci * dcr) / np.where(pos, (ci + cr) ** 2, 1.0), 0.0)
+        dG = np.where(ok, dAS / nhf - AS * dnh / (nhf * nhf), 0.0) * scale - G * (cp / sp)
+    dt = (-cv * cp + sv * sp * dv,
+          -cu * sp + su * sv * cp + su * cv * sp * dv,
+          su * sp + cu * sv * cp + cu * cv * sp * dv)
+    dcphi = _cos_phi_derivative(wi_, wr_, (tx, ty, tz), dt)
+    return G, cphi, dG, np.where(ok, dcphi, 0.0)
 
 
 def _staple_combine(G, cphi, lo, hi, log_s, c2, rho):
@@ -403,15 +451,18 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
             dS = np.concatenate([dP * (Nl * G0), (P * _lobe_rho_derivative(cphi, rho) * G0)[None]])  # (5, N)
         else:
             psi = t(f"{fam}_psi")
-            geometry_cols.append(idx[f"{fam}_psi"])
-            G, cphi = _cached(cache, ("sta", fam, float(offset), float(psi)),
-                              lambda: _staple_geometry(*(q[None] for q in _frames(h, wi, wr, alpha + offset)),
-                                                       norm_sum[None], np.array([[psi]])))
-            G, cphi = G[0], cphi[0]  # (N, U)
+            shape_cols.append(idx[f"{fam}_psi"])
+            G, cphi, dG, dcphi = (a[0] for a in _cached(  # (N, U) each
+                cache, ("sta", fam, float(offset), float(psi)),
+                lambda: _staple_geometry(*(q[None] for q in _frames(h, wi, wr, alpha + offset)),
+                                         norm_sum[None], np.array([[psi]]))))
             P, dP = _profile_derivatives(_U_NODES, lo, hi, log_s, c2)  # (U,), (4, U)
-            NG = _lobe_rho(cphi, rho) * G
+            Nl = _lobe_rho(cphi, rho)
+            NG = Nl * G
             S = NG @ P * _DU
-            dS = np.concatenate([(NG @ dP.T).T, ((_lobe_rho_derivative(cphi, rho) * G) @ P)[None]]) * _DU
+            dS_psi = (_lobe_cos_derivative(cphi, rho) * dcphi * G + Nl * dG) @ P
+            dS = np.concatenate([(NG @ dP.T).T, ((_lobe_rho_derivative(cphi, rho) * G) @ P)[None],
+                                 dS_psi[None]]) * _DU
         ks = np.exp(theta[[idx[f"{fam}_log_ks_{c}"] for c in range(C)]])  # (C,)
         part = S[:, None] * ks  # (N, C)
         spec_sum += part
