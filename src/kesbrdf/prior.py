@@ -191,24 +191,19 @@ def _cos_phi(wx, wy, wz, rx, ry, rz, tx, ty, tz):
 
 
 def _cos_phi_derivative(w, r, t, dt):
-    """d cos φ of :func:`_cos_phi` for a change dt of t (w, r, t, dt: 3-tuples of arrays).
+    """d cos φ of :func:`_cos_phi` for a change dt of a unit t (w, r, t, dt: 3-tuples of arrays).
 
-    p_w = w − (w·t)t, dp_w = −(w·dt)t − (w·t)dt, cos φ = p_i·p_r/(|p_i||p_r|) and
-    d cos φ = (dp_i·p_r + p_i·dp_r)/(|p_i||p_r|) − cos φ (p_i·dp_i/|p_i|² + p_r·dp_r/|p_r|²);
-    zero where cos φ is clipped or undefined.
+    With a = w·t, b = r·t: cos φ = (w·r − ab)/√((|w|² − a²)(|r|² − b²)), so
+    d cos φ = −(b da + a db)/den + cos φ (a da/(|w|² − a²) + b db/(|r|² − b²)),
+    da = w·dt, db = r·dt; zero where cos φ is clipped or undefined.
     """
-    dot = lambda a, b: a[0] * b[0] + a[1] * b[1] + a[2] * b[2]  # noqa: E731
-
-    def proj(v):
-        d, dd = dot(v, t), dot(v, dt)
-        return tuple(v[k] - d * t[k] for k in range(3)), tuple(-dd * t[k] - d * dt[k] for k in range(3))
-
-    (pi, dpi), (pr, dpr) = proj(w), proj(r)
-    ii, rr, num = dot(pi, pi), dot(pr, pr), dot(pi, pr)
-    den = np.sqrt(ii * rr)
+    dot = lambda p, q: p[0] * q[0] + p[1] * q[1] + p[2] * q[2]  # noqa: E731
+    a, b, da, db = dot(w, t), dot(r, t), dot(w, dt), dot(r, dt)
+    ii, rr = dot(w, w) - a * a, dot(r, r) - b * b
+    den = np.sqrt(np.maximum(ii * rr, 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        c = num / den
-        d = (dot(dpi, pr) + dot(pi, dpr)) / den - c * (dot(pi, dpi) / ii + dot(pr, dpr) / rr)
+        c = (dot(w, r) - a * b) / den
+        d = -(b * da + a * db) / den + c * (a * da / ii + b * db / rr)
     return np.where((den > 1e-300) & (np.abs(c) < 1.0), d, 0.0)
 
 
