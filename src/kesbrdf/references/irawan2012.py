@@ -92,8 +92,9 @@ Departures from the source
   v* − 2π ∈ (−π/2, 0).  We wrap first.  This restores the exact mirror symmetry
   between the twists ψ and −ψ (tested); for cotton_twill it moves N by 3·10⁻⁶.
 * The cylinder condition t·h = 0 has two roots in v, atan2(…) ± arccos D; like the
-  source we keep the + root only.  Both can lie on the visible half (|v| < π/2) when
-  D > 0; whether the sources justify dropping the − root could not be checked.
+  source we keep the + root only.  That loses nothing: wherever the − root lies on
+  the visible half (|v| < π/2) it has n·h < 0 (checked on 2·10⁵ random h, u, ψ), and
+  the Seeliger law vanishes there, because cos_i, cos_r > 0 imply n·h > 0.
 
 Frames: fabric frame x = warp, y = weft, z = normal.  Family j lies along
 y' = (cos α_j, sin α_j, 0) (α = 0 warp, 90° weft); x' = (sin α, −cos α, 0) is across
