@@ -93,7 +93,7 @@ Departures from the source
   between the twists ψ and −ψ (tested); for cotton_twill it moves N by 3·10⁻⁶.
 * The cylinder condition t·h = 0 has two roots in v, atan2(…) ± arccos D; like the
   source we keep the + root only.  That loses nothing: wherever the − root lies on
-  the visible half (|v| < π/2) it has n·h < 0 (checked on 2·10⁵ random h, u, ψ), and
+  the visible half (|v| < π/2) it has n·h < 0 (tested on 2·10⁴ random h, u, ψ), and
   the Seeliger law vanishes there, because cos_i, cos_r > 0 imply n·h > 0.
 
 Frames: fabric frame x = warp, y = weft, z = normal.  Family j lies along
