@@ -40,12 +40,20 @@ def test_gltf_material_carries_fit_and_extensions(tmp_path, kes_model, fits):
     res = gltf.export(kes_model, tmp_path / "f.gltf", fit=fits["gltf_pbr"])
     doc = json.loads((tmp_path / "f.gltf").read_text())
     assert res["size"] == (tmp_path / "f.gltf").stat().st_size
-    assert set(doc["extensionsUsed"]) == {"KHR_materials_anisotropy", "KHR_materials_sheen", "KHR_materials_specular"}
+    assert set(doc["extensionsUsed"]) == {"KHR_materials_anisotropy", "KHR_materials_sheen", "KHR_materials_specular", "KHR_materials_ior"}
     mat = doc["materials"][0]
     ext = mat["extensions"]
+    assert set(ext) == set(doc["extensionsUsed"])  # every extension used is used by the material
+    assert ext["KHR_materials_ior"] == {"ior": 1.5}
     assert ext["KHR_materials_anisotropy"]["anisotropyRotation"] == pytest.approx(fits["gltf_pbr"].params["anisotropy_rotation"])
     assert mat["extras"]["kesbrdf"]["fit_error"]["nrmse"] == pytest.approx(fits["gltf_pbr"].error["nrmse"])
     assert "APPROXIMATION" in mat["extras"]["kesbrdf"]["note"]
+    # the informative F0 / equivalent index: F0 = min(0.04 c_s, 1) s, ior_eq = (1+√F0)/(1−√F0)
+    spec, p = mat["extras"]["kesbrdf"]["specular"], fits["gltf_pbr"].params
+    f0 = np.minimum(0.04 * np.broadcast_to(p["specular_color"], (3,)), 1.0) * p["specular"]
+    np.testing.assert_allclose(spec["f0"], f0, rtol=1e-12)
+    for eta, f in zip(spec["equivalent_ior"], f0):
+        assert eta is None if f >= 1 else ((eta - 1) / (eta + 1)) ** 2 == pytest.approx(f, rel=1e-9)
     for m in doc["meshes"]:
         assert {"POSITION", "NORMAL", "TANGENT", "TEXCOORD_0"} <= set(m["primitives"][0]["attributes"])
 
@@ -59,6 +67,18 @@ def test_glb_round_trips_through_pygltflib(tmp_path, kes_model, fits):
         fits["gltf_pbr"].params["sheen_roughness"]
     )
     assert len(g.binary_blob()) == g.buffers[0].byteLength
+
+
+def test_written_ior_is_the_fibre_index_the_fit_assumed():
+    """KHR_materials_ior carries the η the gltf_pbr fit used, which is textile fibres' η of
+    the prior's θ_d law; with ior 1.5 the KHR_materials_specular F0 base is 0.04."""
+    from kesbrdf.export.gltf_pbr import IOR, equivalent_ior
+    from kesbrdf.prior import THETA_D_ETA
+
+    assert IOR == THETA_D_ETA
+    assert ((IOR - 1) / (IOR + 1)) ** 2 == pytest.approx(0.04)
+    assert equivalent_ior([0.04])[0] == pytest.approx(IOR)
+    assert equivalent_ior([1.0]) == [None]
 
 
 def test_gltf_rejects_unknown_suffix(tmp_path, kes_model, fits):
@@ -87,6 +107,9 @@ def test_khronos_gltf_validator_reports_no_errors_or_warnings(tmp_path, kes_mode
         # infos only: the validator does not know that KHR_materials_anisotropy uses TANGENT
         assert {m["code"] for m in issues["messages"]} <= {"UNUSED_MESH_TANGENT", "UNUSED_OBJECT"}
         assert r["report"]["info"]["materialCount"] == 1
+        # the validator parsed the ior extension (it knows KHR_materials_ior and checks its
+        # schema; an unknown one would be an UNSUPPORTED_EXTENSION info, excluded above)
+        assert "KHR_materials_ior" in r["report"]["info"]["extensionsUsed"]
 
 
 #: three.js renders the fitted glTF with its own lobes (Neubelt sheen visibility, its

@@ -1,13 +1,21 @@
 """glTF 2.0 export (formats ``gltf`` and ``glb``): the fitted material on preview meshes.
 
 The file holds one material (core metallic-roughness plus ``KHR_materials_anisotropy``,
-``KHR_materials_sheen`` and ``KHR_materials_specular``, fitted by
+``KHR_materials_sheen``, ``KHR_materials_specular`` and ``KHR_materials_ior``, fitted by
 :func:`kesbrdf.export.analytic_fit.fit_analytic` against
 :class:`kesbrdf.export.gltf_pbr.GltfPbr`), used by two meshes with NORMAL, TANGENT
 (along the warp, w = +1) and TEXCOORD_0: a swatch and a sphere
 (:mod:`kesbrdf.export.preview_mesh`), side by side in one scene.  The fit error
 (NRMSE, relative L1, worst configurations) is written in ``material.extras.kesbrdf``
 so nobody mistakes the approximation for the measurement.
+
+``KHR_materials_ior`` carries the index the fit assumed, 1.5 (the glTF default, and
+textile fibres' η): written explicitly so that tools which read the index (KHR
+transmission/volume-aware renderers, converters to other shading models) do not have
+to know the default.  The fitted per-channel F0 stays in ``specularColorFactor``
+(KHR_materials_specular scales the ior's F0 by it); writing an index derived from
+F0, ior = (1 + √F0)/(1 − √F0), would count F0 twice.  That equivalent index is
+written for information in ``extras.kesbrdf.specular``.
 
 ``.gltf`` embeds the buffer as a base64 data URI (one self-contained file);
 ``.glb`` is the binary container.  Written with ``pygltflib``.
@@ -26,7 +34,7 @@ from kesbrdf.errors import KesbrdfError
 __all__ = ["export", "build_gltf", "OPEN_WITH"]
 
 OPEN_WITH = (
-    "any glTF 2.0 viewer with KHR_materials_anisotropy/sheen/specular: Khronos glTF Sample Viewer "
+    "any glTF 2.0 viewer with KHR_materials_anisotropy/sheen/specular/ior: Khronos glTF Sample Viewer "
     "(github.khronos.org/glTF-Sample-Viewer-Release, drag and drop), three.js GLTFLoader, "
     "Blender (File > Import > glTF 2.0), Babylon.js Sandbox"
 )
@@ -63,7 +71,7 @@ def build_gltf(fit, meshes, model_info: dict | None = None):
     """A ``pygltflib.GLTF2`` with the fitted material on ``meshes`` (one node each)."""
     import pygltflib as g
 
-    from kesbrdf.export.gltf_pbr import EXTENSIONS, material_json
+    from kesbrdf.export.gltf_pbr import EXTENSIONS, IOR, equivalent_ior, material_json, specular_f0
 
     blob = bytearray()
     buffer_views, accessors = [], []
@@ -94,6 +102,14 @@ def build_gltf(fit, meshes, model_info: dict | None = None):
         gl_meshes.append(g.Mesh(name=m.name, primitives=[g.Primitive(attributes=attrs, indices=indices, material=0)]))
         nodes.append(g.Node(name=m.name, mesh=k, translation=[float(offsets[k]), 0.0, 0.0]))
     extras = _fit_extras(fit)
+    f0 = specular_f0(fit.params)
+    extras["kesbrdf"]["specular"] = {
+        "ior": IOR,
+        "f0": f0,
+        "equivalent_ior": equivalent_ior(f0),
+        "note": "F0 per channel = min(((ior-1)/(ior+1))^2 * specularColorFactor, 1) * specularFactor; "
+        "equivalent_ior = (1+sqrt(F0))/(1-sqrt(F0)) is informative, the material keeps ior",
+    }
     if model_info:
         extras["kesbrdf"]["model"] = model_info
     material = g.Material(**_material_kwargs(material_json(fit.params, extras=extras)))
@@ -136,7 +152,7 @@ def _model_info(model) -> dict:
 
 #: File endings ``kesbrdf export`` accepts for this format (checked before any work).
 EXTENSIONS = (".gltf",)
-HELP = 'glTF 2.0 (JSON + embedded buffer): fitted metallic-roughness + KHR anisotropy/sheen/specular on a swatch and a sphere'
+HELP = 'glTF 2.0 (JSON + embedded buffer): fitted metallic-roughness + KHR anisotropy/sheen/specular/ior on a swatch and a sphere'
 
 
 def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, error_grid=None) -> dict:

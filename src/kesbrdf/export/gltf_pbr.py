@@ -1,4 +1,4 @@
-r"""glTF 2.0 metallic-roughness BRDF with KHR_materials_anisotropy, _sheen and _specular.
+r"""glTF 2.0 metallic-roughness BRDF with KHR_materials_anisotropy, _sheen, _specular and _ior.
 
 A numpy implementation of the BRDF the ratified extension texts define, used as the
 target model of :func:`kesbrdf.export.analytic_fit.fit_analytic`:
@@ -9,7 +9,7 @@ target model of :func:`kesbrdf.export.analytic_fit.fit_analytic`:
 
     F = F_0 + (F_{90} - F_0)(1 - |v\cdot h|)^5,\quad
     F_0 = \min(0.04\,c_{spec}, 1)\,k_{spec},\quad F_{90} = k_{spec}
-    \qquad\text{(KHR_materials_specular, ior = 1.5)}
+    \qquad\text{(KHR_materials_specular; 0.04 = ((\eta-1)/(\eta+1))^2, KHR_materials_ior \eta = 1.5)}
 
     f_{base} = F\,V\,D + (1 - \max_c F)\,c_{base}/\pi \qquad\text{(core Appendix B, metallic = 0)}
 
@@ -46,14 +46,19 @@ from kesbrdf.export.microfacet import (
     tangent_frame,
 )
 
-__all__ = ["GltfPbr", "GLTF_PBR", "gltf_brdf", "material_json", "SHEEN_ROUGHNESS_MIN", "EXTENSIONS"]
+__all__ = ["GltfPbr", "GLTF_PBR", "gltf_brdf", "material_json", "specular_f0", "equivalent_ior", "SHEEN_ROUGHNESS_MIN", "EXTENSIONS", "IOR"]
 
 #: sheenRoughness is fitted in [this, 1]: below it the Charlie lobe (exponent 1/r)
 #: is a spike at grazing that no measurement grid resolves.
 SHEEN_ROUGHNESS_MIN = 0.1
 #: roughness lower bound of the fit (α = 0.0004: far sharper than any fabric highlight).
 ROUGHNESS_MIN = 0.02
-EXTENSIONS = ("KHR_materials_anisotropy", "KHR_materials_sheen", "KHR_materials_specular")
+#: The dielectric's index of refraction, fixed in the fit and written as
+#: ``KHR_materials_ior``.  1.5 is both the glTF default and the refractive index of
+#: textile fibres (η ≈ 1.5, ``kesbrdf.prior.THETA_D_ETA``; a test keeps them equal).
+#: The per-channel F0 the fit needs is carried by ``specularColorFactor`` instead.
+IOR = 1.5
+EXTENSIONS = ("KHR_materials_anisotropy", "KHR_materials_sheen", "KHR_materials_specular", "KHR_materials_ior")
 
 
 def _max3(c):
@@ -72,7 +77,7 @@ def gltf_brdf(
     sheen_color=(0.0,),
     sheen_roughness=0.5,
     metallic=0.0,
-    ior=1.5,
+    ior=IOR,
 ):
     """f_r (1/sr) of a glTF material, shape (N, C) with C = len(base_color).
 
@@ -104,7 +109,7 @@ def gltf_brdf(
     t, b = tangent_frame(anisotropy_rotation)
     D = ggx_anisotropic_ndf(h, t, b, alpha_t, alpha_b)
     V = ggx_anisotropic_visibility(wi, wr, t, b, alpha_t, alpha_b)
-    # Fresnel (KHR_materials_specular with KHR_materials_ior's default 1.5)
+    # Fresnel (KHR_materials_specular with the KHR_materials_ior index)
     vh = np.sum(wr * h, axis=-1)
     fw = schlick_weight(vh)[..., None]
     f0 = np.minimum(((ior - 1) / (ior + 1)) ** 2 * specular_color, 1.0) * specular
@@ -128,7 +133,7 @@ class GltfPbr:
     Fitted: baseColor (per channel), roughness, anisotropyStrength, anisotropyRotation,
     specularFactor, specularColorFactor (per channel, up to 1/0.04 = 25 so that F0 can
     reach 1), sheenColorFactor (per channel), sheenRoughnessFactor.  Fixed: metallic 0,
-    ior 1.5 (KHR_materials_ior not written).
+    ior = :data:`IOR` (written as ``KHR_materials_ior``).
     """
 
     name = "gltf_pbr"
@@ -162,6 +167,7 @@ class GltfPbr:
             p["specular_color"],
             p["sheen_color"],
             p["sheen_roughness"],
+            ior=IOR,
         )
 
     def canonical(self, p):
@@ -181,8 +187,31 @@ def _rgb(v) -> list[float]:
     return [float(a) for a in v[:3]]
 
 
+def specular_f0(params: dict, ior: float = IOR) -> list[float]:
+    r"""Normal-incidence reflectance F0 per channel of fitted parameters (KHR_materials_specular).
+
+    :math:`F_0 = \min(((\eta-1)/(\eta+1))^2\,c_s, 1)\,s` with c_s = specularColorFactor
+    and s = specularFactor.
+    """
+    c = np.asarray(_rgb(params["specular_color"]))
+    return [float(a) for a in np.minimum(((ior - 1) / (ior + 1)) ** 2 * c, 1.0) * float(params["specular"])]
+
+
+def equivalent_ior(f0) -> list[float]:
+    r"""The index a plain dielectric would need for reflectance F0: :math:`(1+\sqrt{F_0})/(1-\sqrt{F_0})`.
+
+    Informative only (``extras``): the written material keeps ior = :data:`IOR` and
+    carries F0 in ``specularColorFactor``; F0 ≥ 1 has no finite index (None).
+    """
+    out = []
+    for f in np.atleast_1d(np.asarray(f0, float)):
+        r = math.sqrt(max(float(f), 0.0))
+        out.append(float((1 + r) / (1 - r)) if r < 1 else None)
+    return out
+
+
 def material_json(params: dict, name: str = "kesbrdf_fabric", extras: dict | None = None) -> dict:
-    """The glTF ``material`` object (core + three extensions) of fitted parameters."""
+    """The glTF ``material`` object (core + four extensions) of fitted parameters."""
     base = _rgb(params["base_color"])
     material = {
         "name": name,
@@ -204,6 +233,7 @@ def material_json(params: dict, name: str = "kesbrdf_fabric", extras: dict | Non
                 "specularFactor": float(params["specular"]),
                 "specularColorFactor": _rgb(params["specular_color"]),
             },
+            "KHR_materials_ior": {"ior": IOR},
         },
     }
     if extras is not None:

@@ -1,78 +1,111 @@
 r"""Far-field woven-cloth BRDF after Irawan & Marschner, "Specular Reflection from Woven
-Cloth", ACM TOG 31(1), article 11, 2012 (IM12 below).
+Cloth", ACM TOG 31(1), article 11, 2012 (IM12), and Piti Irawan's Cornell thesis
+"Appearance of Woven Cloth", 2008 (Irawan 2008), where the model is derived in full.
 
-What IM12 models
-----------------
+Sources and numbering
+---------------------
+Neither text could be read past its front matter here: the stored copies of the thesis
+(zlibrary.cc "appearance-of-woven-cloth", scribd 211705726) reach the title page,
+abstract, biography and acknowledgements only, and no copy of the TOG paper's body was
+found.  **No equation numbers are cited, because none could be checked**; giving some
+would be inventing them.  What *was* read is Irawan's own implementation, as
+redistributed with permission in Mitsuba 0.x (``src/bsdfs/irawan.cpp``:
+``evalFilamentIntegrand``, ``evalStapleIntegrand``, ``radiusOfCurvature``,
+``vonMises``, ``seeliger``).  Its header names the thesis as the model's description
+and its comments cite thesis sections: Irawan 2008 §5.3 (the spine conic chosen by r̂),
+§5.3.1 circle, §5.3.2 parabola, §5.3.3 hyperbola, and ch. 6 (the segment coordinates
+u, v).  Those are the only section numbers below; every formula of this module was
+checked term by term against that code (frames rotated, see the end).
+
+What the model is
+-----------------
 Cloth is two families of yarns, warp and weft.  A yarn is a bundle of fibres; a
 fibre reflects light specularly wherever the half vector h is perpendicular to its
-tangent t (the cylinder condition, IM12 §4).  Along a yarn segment the fibre tangent
-tilts out of the cloth plane by the yarn's *u* angle, |u| ≤ u_max (the yarn follows
-a curved spine over and under the crossing yarns, IM12 §5.3); across the yarn the
-surface normal turns by the *v* angle, |v| ≤ π/2.  Two kinds of yarn:
+tangent t (the cylinder condition).  Along a yarn segment the fibre tangent tilts out
+of the cloth plane by the yarn's *u* angle, |u| ≤ u_max (the yarn follows a curved
+spine over and under the crossing yarns, Irawan 2008 §5.3); across the yarn the surface
+normal turns by the *v* angle, |v| ≤ π/2 (ch. 6 maps a segment's rectangle w × l
+linearly onto these two angles).  Two kinds of yarn:
 
 *filament* (ψ = 0)
     fibres parallel to the yarn.  The specular point on a segment is the tilt
-    u*(h) = atan2(h'_y, h'_z) (IM12 §5.1), valid while |u*| < u_max.
+    u*(h) = atan2(h'_y, h'_z) (the source's ``u_of_v``), valid while |u*| < u_max.
 *staple* (twist ψ ≠ 0)
     fibres wound around the yarn at angle ψ.  For every tilt u the specular point is
-    at the across-yarn angle v*(u) (IM12 §5.2)
+    at the across-yarn angle v*(u) (the source's ``v_of_u``)
 
     .. math::
 
         D = \frac{h'_y\cos u - h'_z\sin u}{\sqrt{h'^2_x + (h'_y\sin u + h'_z\cos u)^2}\,\tan\psi},
         \qquad v^* = \operatorname{atan2}(-h'_y\sin u - h'_z\cos u,\ h'_x) + \arccos D
 
-    valid while |D| < 1 and |v*| ≤ π/2.
+    valid while |D| < 1 and |v*| ≤ π/2, v* taken in (−π, π] (see Departures).
 
-The scattering of one specular point (IM12 §5, "fs = G · f_c · A"):
+The scattering of one specular point is fs = G · f_c · A:
 
 * geometry factor :math:`G = a\,(R(u) + a\cos v) / (|\omega_i+\omega_r|\,J)` with
-  a = w/2, the spine's radius of curvature R(u) (circle, ellipse, parabola or
-  hyperbola selected by κ, IM12 §5.3) and the Jacobian J = |(t × h)_x| for filaments,
-  |n·h|·|sin ψ| for staple yarns;
+  a = w/2, the spine's radius of curvature R(u) (Irawan 2008 §5.3.1–5.3.3) and the
+  Jacobian J = |(t × h)_x| for filaments (= √(1 − h'_x²) at u*), n·h·|sin ψ| for
+  staple yarns;
 * phase function :math:`f_c = \alpha + \mathrm{vM}(-\omega_i\cdot\omega_r;\ \beta)`, a
-  uniform part plus a von Mises lobe (IM12 §4.2);
+  uniform part plus a von Mises lobe of concentration β;
 * attenuation A = Seeliger law :math:`\frac{1}{4\pi}\frac{\cos_i\cos_r}{\cos_i+\cos_r}`
-  on the yarn-surface normal n (IM12 §4.3); filament yarns fade it with a smoothstep
-  over the last ``ss``·u_max of the tilt range.
+  (unit albedo) on the yarn-surface normal n; filament yarns fade it with
+  1 − smoothstep over the last ``ss``·u_max of the tilt range, and evaluate R at
+  min(|u*|, (1 − ss) u_max) on a spine whose u_max is (1 − ss) u_max.
 
-Far field
----------
-IM12 renders a spatially resolved weave: a pixel at (u, v) on a segment keeps the
-specular point only within a highlight width and rescales it by the "domain
-transform".  Averaging that over a whole segment (u uniform in ±u_max, v uniform in
-±π/2) leaves, independently of the highlight width,
+Far field (our derivation, not in the sources)
+----------------------------------------------
+The source renders a spatially resolved weave: a pixel at (u, v) of a segment keeps
+the specular point only if it lies within a highlight width δ of the pixel, and
+multiplies fs by the "domain transform" (π l/δ_y for filaments, 2 w u_max/δ_x for
+staple yarns).  Averaging over a whole segment (u uniform in ±u_max, v uniform in
+±π/2), the window keeps a fraction δ_y/l (resp. δ_x/w) of the pixels, so δ cancels and
 
 .. math::
 
     S_\text{fil} = \int_{-\pi/2}^{\pi/2} G\,A\,dv \Big|_{u=u^*},\qquad
     S_\text{sta} = \int_{-u_\max}^{u_\max} G\,A\,du \Big|_{v=v^*(u)}
 
-(the far-field reading is this module's derivation; it is exact for the average of
-the per-pixel integrands).  Each family's segments are weighted by its share of the
-pattern times the pattern's area factor (A_warp + A_weft)/A_family; for all six
-presets below that product is exactly 1, so the BRDF is
+exactly (the source's window is clamped inside the segment, so the fraction holds at
+the ends too).  Each family's segments are weighted by its share of the pattern times
+the source's area factor (A_warp + A_weft)/A_family; for all six presets below that
+product is exactly 1, so the BRDF is
 
 .. math::
 
     f_r = \frac{1}{\pi}\Big[\sum_j c_j k_{d,j} + N\,f_c\sum_j k_{s,j}\,S_j\Big]
 
-with c_j the family's coverage.  N normalises the specular part so that its
-cosine-weighted mean albedo is 1 (k_s is then an albedo-like weight; this is the
-choice made by renderer implementations of IM12; we compute it with a fixed,
-seeded quadrature so it is deterministic).
+with c_j the family's coverage.
+
+Departures from the source
+--------------------------
+* The far-field average above replaces the per-pixel evaluation.  The source's
+  per-fibre intensity noise (min(−ln ξ, 10), mean ≈ 1) averages out and is left out;
+  its per-segment Perlin variation of u_max would not average out exactly and is
+  dropped.
+* N normalises the specular part so that its cosine-weighted mean albedo is 1 (k_s is
+  then an albedo-like weight); the source leaves the scale to the user's k_s and adds
+  k_d without 1/π.  N comes from a fixed, seeded quadrature (deterministic).
+* v* wrap: atan2 + arccos lies in (−π, 2π]; the source tests |v*| < π/2 on that raw
+  value and so drops specular points with v* ∈ (3π/2, 2π), which are the valid points
+  v* − 2π ∈ (−π/2, 0).  We wrap first.  This restores the exact mirror symmetry
+  between the twists ψ and −ψ (tested); for cotton_twill it moves N by 3·10⁻⁶.
+* The cylinder condition t·h = 0 has two roots in v, atan2(…) ± arccos D; like the
+  source we keep the + root only.  That loses nothing: wherever the − root lies on
+  the visible half (|v| < π/2) it has n·h < 0 (tested on 2·10⁴ random h, u, ψ), and
+  the Seeliger law vanishes there, because cos_i, cos_r > 0 imply n·h > 0.
 
 Frames: fabric frame x = warp, y = weft, z = normal.  Family j lies along
 y' = (cos α_j, sin α_j, 0) (α = 0 warp, 90° weft); x' = (sin α, −cos α, 0) is across
-it.  The BRDF is reciprocal by construction: every factor depends on (ωi, ωr) only
-through h, ωi + ωr, ωi·ωr and the symmetric Seeliger law.
+it.  (The source has its warp along y and rotates ω by +90° about z for the weft; both
+are proper rotations, so the sign of ψ means the same handedness.)  The BRDF is
+reciprocal by construction: every factor depends on (ωi, ωr) only through h,
+ωi + ωr, ωi·ωr and the symmetric Seeliger law.
 
-Equation numbers: the printed paper was not available while this was written; the
-section numbers above follow IM12's structure as implemented by renderers that cite
-it (the parameter tables are Piti Irawan's weave data, redistributed with LuxRender
-and Mitsuba).  Presets: yarn geometry (ψ, u_max, κ, w, l), α, β, ss and the weave
-coverage come from those tables; k_d and k_s are **our guesses** (documented per
-preset) because the tables leave colour to the user.
+Presets: yarn geometry (ψ, u_max, κ, w, l), α, β, ss and the weave coverage come from
+Piti Irawan's weave data, redistributed with LuxRender and Mitsuba; k_d and k_s are
+**our guesses** (documented per preset) because the tables leave colour to the user.
 """
 
 from __future__ import annotations
@@ -112,7 +145,7 @@ class Yarn:
 
     psi_deg : twist angle ψ (0 = filament yarn).
     umax_deg : largest tilt u_max of the fibre tangent out of the cloth plane.
-    kappa : spine shape κ (0 = circle; IM12 §5.3), > −1.
+    kappa : spine shape κ (0 = circle; Irawan 2008 §5.3), > −1.
     width, length : yarn width w and segment length l (same unit).
     kd, ks : RGB diffuse and specular weights of the family.
     """
@@ -154,7 +187,7 @@ def yarn_frame(w, alpha: float):
 
 
 def seeliger(cos_1, cos_2):
-    r"""Seeliger law (IM12 §4.3) with unit albedo: :math:`\frac{1}{4\pi}\frac{c_1c_2}{c_1+c_2}`, 0 if either ≤ 0."""
+    r"""Seeliger law, the attenuation A, with unit albedo: :math:`\frac{1}{4\pi}\frac{c_1c_2}{c_1+c_2}`, 0 if either ≤ 0."""
     c1 = np.maximum(cos_1, 0.0)
     c2 = np.maximum(cos_2, 0.0)
     ok = (c1 > 0) & (c2 > 0)
@@ -163,16 +196,22 @@ def seeliger(cos_1, cos_2):
 
 
 def von_mises(cos_x, beta: float):
-    r"""von Mises density on the circle :math:`e^{\beta\cos x}/(2\pi I_0(\beta))`, overflow-safe."""
+    r"""von Mises density on the circle :math:`e^{\beta\cos x}/(2\pi I_0(\beta))`, overflow-safe.
+
+    The forward-scattering part of f_c.  The source evaluates I_0 by a polynomial
+    approximation; we use scipy's exactly scaled ``i0e``.
+    """
     return np.exp(beta * (np.asarray(cos_x, float) - 1.0)) / (2 * np.pi * i0e(beta))
 
 
 def radius_of_curvature(u, umax: float, kappa: float, width: float, length: float):
-    """Radius of curvature R(u) of the yarn spine (IM12 §5.3): a conic chosen by κ.
+    """Radius of curvature R(u) of the yarn spine (Irawan 2008 §5.3): a conic chosen by κ.
 
-    r̂ = 1 + κ(1 + 1/tan u_max) selects circle (r̂ = 1), ellipse (r̂ > 0), parabola
-    (r̂ = 0) or hyperbola (r̂ < 0); the conic passes the segment's end points with slope
-    u_max.  Returns values ≥ 0.
+    r̂ = 1 + κ(1 + 1/tan u_max) selects circle (r̂ = 1, §5.3.1), ellipse (r̂ > 0),
+    parabola (r̂ = 0, §5.3.2) or hyperbola (r̂ < 0, §5.3.3); the conic passes the
+    segment's end points with slope u_max.  Term by term the source's
+    ``radiusOfCurvature``; here clipped to ≥ 0 and with the hyperbola's artanh argument
+    kept inside (−1, 1).
     """
     u = np.abs(np.asarray(u, float))
     a = 0.5 * width
@@ -209,6 +248,9 @@ def filament_integral(hp, wip, wrp, norm_sum, yarn: Yarn, ss: float = 0.0, n_v: 
     r"""S_fil of one filament family (module docstring), shape (N,).
 
     ``hp, wip, wrp`` are h, ωi, ωr in the family frame (N, 3); ``norm_sum`` = |ωi + ωr|.
+    The integrand is the source's ``evalFilamentIntegrand`` without f_c, the domain
+    transform and the highlight window (they cancel in the far field); the v integral
+    is Gauss–Legendre with ``n_v`` nodes.
     """
     umax = np.radians(yarn.umax_deg)
     a = 0.5 * yarn.width
@@ -232,7 +274,12 @@ def filament_integral(hp, wip, wrp, norm_sum, yarn: Yarn, ss: float = 0.0, n_v: 
 
 
 def staple_integral(hp, wip, wrp, norm_sum, yarn: Yarn, n_u: int = N_U):
-    r"""S_sta of one staple family (module docstring), shape (N,)."""
+    r"""S_sta of one staple family (module docstring), shape (N,).
+
+    The integrand is the source's ``evalStapleIntegrand`` without f_c, the domain
+    transform and the highlight window, with v* wrapped into (−π, π] (module docstring,
+    Departures); the u integral is Gauss–Legendre with ``n_u`` nodes.
+    """
     umax = np.radians(yarn.umax_deg)
     psi = np.radians(yarn.psi_deg)
     a = 0.5 * yarn.width
@@ -244,7 +291,8 @@ def staple_integral(hp, wip, wrp, norm_sum, yarn: Yarn, n_u: int = N_U):
     with np.errstate(invalid="ignore", divide="ignore"):
         D = B / (np.sqrt(hx**2 + A**2) * np.tan(psi))
     ok = np.abs(D) < 1.0
-    v = np.arctan2(-A, hx) + np.arccos(np.clip(D, -1.0, 1.0))
+    v = np.arctan2(-A, hx) + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
+    v = np.where(v > np.pi, v - 2 * np.pi, v)  # the same point, as an angle in (−π, π]
     ok &= np.abs(v) <= np.pi / 2
     sv, cv = np.sin(v), np.cos(v)
     n = (sv, su * cv, cu * cv)
