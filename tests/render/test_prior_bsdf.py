@@ -164,3 +164,22 @@ def test_chi2_prior_sampling(render_module, prior_files, name, theta):
         sample_count=CHI2_SAMPLES, res=CHI2_RES, ires=CHI2_IRES, seed=2,
     )
     assert test.run(), test.messages
+
+
+def test_compare_render_cli_scores_kes_and_prior(render_module, tmp_path):
+    """``kesbrdf compare-render --with-prior``: both models of one measurement, one panel."""
+    import json
+
+    from PIL import Image
+
+    from kesbrdf.cli.main import main
+
+    out = tmp_path / "cmp.png"
+    assert main(["compare-render", "--reference", "satin-ward", "--with-prior", "--spp", "4",
+                 "--resolution", "48x36", "-o", str(out)]) == 0
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert {k: v["kind"] for k, v in meta["models"].items()} == {"kes": "kes", "fibre-prior": "fibre-prior"}
+    assert meta["flip"] == meta["models"]["kes"]["flip"]
+    assert all(0.0 <= v["flip"] <= 1.0 and np.isfinite(v["rel_rmse"]) for v in meta["models"].values())
+    # reference | KES | FLIP | prior+residual | FLIP
+    assert Image.open(out).size[0] == 5 * 48

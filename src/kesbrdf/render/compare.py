@@ -77,10 +77,12 @@ __all__ = [
 
 PROTOCOLS = ("paper", "dense")
 #: Models a comparison can render: ``kes`` (the protocol's KES kind: ``kes`` on the
-#: paper protocol, ``kes-halfdiff`` on the dense grid) and ``fibre-prior``.
-MODELS = ("kes", "fibre-prior")
-#: Panel titles of the models.
-MODEL_TITLES = {"kes": "KES", "kes-halfdiff": "KES half/diff", "fibre-prior": "prior+residual"}
+#: paper protocol, ``kes-halfdiff`` on the dense grid), ``fibre-prior`` (prior × residual)
+#: and ``prior-only`` (the same kind fitted with ``residual=False``: the pure prior).
+MODELS = ("kes", "fibre-prior", "prior-only")
+#: Panel titles of the models (by model kind for ``kes``).
+MODEL_TITLES = {"kes": "KES", "kes-halfdiff": "KES half/diff", "fibre-prior": "prior+residual",
+                "prior-only": "prior only"}
 #: References compared by default (the CLI's, the satins, one felt).
 DEFAULT_REFERENCES = ("satin-ward", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin", "rgl-felt-white")
 #: Displayed value of the reference's 99.5th-percentile cloth luminance (auto exposure).
@@ -111,10 +113,10 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
     if model not in MODELS:
         raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
     m = measurement if measurement is not None else measure(ref, protocol=protocol)
-    if model == "fibre-prior":
+    if model in ("fibre-prior", "prior-only"):
         from kesbrdf.prior_model import FibrePriorModel
 
-        return FibrePriorModel.fit_measurement(m), len(m)
+        return FibrePriorModel.fit_measurement(m, residual=model == "fibre-prior"), len(m)
     if protocol == "paper":
         from kesbrdf.model import fit
 
@@ -277,7 +279,8 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
                       **{f"model:{mo}": img for mo, img in images.items()}}
     if output is not None:
         output = Path(output)
-        columns = [(f"{MODEL_TITLES[out['models'][mo]['kind']]} model ({protocol})", results[mo]) for mo in models]
+        columns = [(f"{MODEL_TITLES[out['models'][mo]['kind'] if mo == 'kes' else mo]} model ({protocol})", results[mo])
+                   for mo in models]
         write_panel(output, first["_ref8"], first["_test8"], first["_magma"], out, columns=columns)
         meta = {k: v for k, v in out.items() if not k.startswith("_")}
         json_path = output.with_suffix(".json")
