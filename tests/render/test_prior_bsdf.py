@@ -130,12 +130,16 @@ def test_below_horizon_is_zero_unless_two_sided(render_module, prior_files, rng)
 
 def test_scenes_draw_a_fibre_prior_file_with_this_plugin(render_module, prior_files):
     from kesbrdf.render.bsdf import check_model
-    from kesbrdf.render.scenes import RenderOptions, bsdf_dict
+    from kesbrdf.render.scenes import RenderOptions, bsdf_dict, load_scene
 
     path, _ = prior_files["dense-staple"]
     assert check_model(path).kind == "fibre-prior"
     d = bsdf_dict(path, RenderOptions(base_color=(0.5, 0.2, 0.1)))
     assert d["type"] == "kesbrdf_prior" and "mapping" not in d and d["base_color"] == "0.5,0.2,0.1"
+    # a scene built from the file alone (as `kesbrdf render` and the colourway sheet do)
+    scene = load_scene(path, "sphere", RenderOptions(resolution=(16, 12), spp=1))
+    cloth = [s for s in scene.shapes() if s.id() == "cloth"][0]
+    assert str(cloth.bsdf()).startswith("FibrePriorBSDF[")
 
 
 def test_wrong_kind_is_rejected_in_one_line(render_module, tmp_path):
