@@ -4,7 +4,12 @@ For each reference of :data:`kesbrdf.render.compare.DEFAULT_REFERENCES` and each
 (``paper``: 116 samples, kind ``kes``; ``dense``: 6° in-plane grid, kind ``kes-halfdiff``)
 the sphere is rendered with the reference BRDF itself and with the model fitted from its
 virtual measurements (160x120, 64 spp, area light in a dark room,
-:func:`kesbrdf.render.compare.default_options`).  ``noise_*`` is the same comparison between
+:func:`kesbrdf.render.compare.default_options`): the protocol's KES kind (``flip``,
+``rel_rmse``, as before) and the fibre prior times its residual fitted to the same
+measurement (kind ``fibre-prior``, rendered by the ``kesbrdf_prior`` plugin:
+``prior_flip``, ``prior_rel_rmse``), and the pure prior of that fit (``residual=False``:
+``prior_only_flip``, ``prior_only_rel_rmse``), which tells the prior's error from the
+residual's.  ``noise_*`` is the same comparison between
 two seeds of the reference: the floor below which a model error is not measurable.
 
 Also, on the two Sadeghi satins, the paper-protocol model with the lobe held beyond the
@@ -34,9 +39,13 @@ def run() -> dict:
             continue
         for protocol in compare.PROTOCOLS:
             t0 = time.perf_counter()
-            r = compare.compare_render(name, protocol, "sphere", compare.default_options())
+            r = compare.compare_render(name, protocol, "sphere", compare.default_options(),
+                                       models=("kes", "fibre-prior", "prior-only"))
+            prior, pure = r["models"]["fibre-prior"], r["models"]["prior-only"]
             out[f"{name}/{protocol}"] = {
                 "flip": r["flip"], "rel_rmse": r["rel_rmse"],
+                "prior_flip": prior["flip"], "prior_rel_rmse": prior["rel_rmse"],
+                "prior_only_flip": pure["flip"], "prior_only_rel_rmse": pure["rel_rmse"],
                 "noise_flip": r["noise_flip"], "noise_rel_rmse": r["noise_rel_rmse"],
                 "samples": r["samples"], "model_kind": r["model_kind"],
                 "seconds": time.perf_counter() - t0,

@@ -19,6 +19,9 @@ def add_arguments(p):
     p.add_argument("--params", default=None, help="JSON object overriding the reference's parameters")
     p.add_argument("--base-color", default=None, metavar="R,G,B",
                    help="render both with this body albedo (default: each one's own body)")
+    p.add_argument("--with-prior", action="store_true",
+                   help="also fit the fibre prior x residual (kind fibre-prior) to the same measurement and "
+                        "render it next to the KES model")
     p.add_argument("-o", "--output", required=True, help="panel PNG (the numbers go to <stem>.json)")
     add_render_options(p, spp=64, resolution="160x120")
     # one small light in a dark room shows the lobe's shape (kesbrdf.render.compare)
@@ -32,8 +35,11 @@ def run(args) -> int:
     opts = render_options(args, base_color=parse_rgb_flag(args.base_color, "--base-color"))
     stderr(f"comparing {args.reference} ({args.protocol} protocol) on the {args.scene}, "
            f"{opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
-    r = compare.compare_render(args.reference, args.protocol, args.scene, opts, output=args.output, params=args.params)
-    stderr(f"FLIP {r['flip']:.4f}  relative RMSE {r['rel_rmse']:.4f}  "
-           f"(noise floor: FLIP {r['noise_flip']:.4f}, relative RMSE {r['noise_rel_rmse']:.4f})")
+    models = ("kes", "fibre-prior") if args.with_prior else ("kes",)
+    r = compare.compare_render(args.reference, args.protocol, args.scene, opts, output=args.output, params=args.params,
+                               models=models)
+    for name, m in r["models"].items():
+        stderr(f"{m['kind']}: FLIP {m['flip']:.4f}  relative RMSE {m['rel_rmse']:.4f}")
+    stderr(f"(noise floor: FLIP {r['noise_flip']:.4f}, relative RMSE {r['noise_rel_rmse']:.4f})")
     stderr(f"wrote {r['panel']} and {r['json']}")
     return 0

@@ -1,7 +1,10 @@
 """Rendering kesbrdf models with Mitsuba 3 (install ``kesbrdf[render]``).
 
 ``import kesbrdf.render`` selects the ``llvm_ad_rgb`` variant when no variant is set
-yet, and registers the BSDF plugin ``kesbrdf`` (:mod:`kesbrdf.render.bsdf`).  Dr.Jit's
+yet, and registers the BSDF plugins ``kesbrdf`` (:mod:`kesbrdf.render.bsdf`, kind ``kes``),
+``kesbrdf_halfdiff`` (:mod:`~kesbrdf.render.halfdiff_bsdf`, kind ``kes-halfdiff``),
+``kesbrdf_prior`` (:mod:`~kesbrdf.render.prior_bsdf`, kind ``fibre-prior``) and the
+reference BSDFs (:mod:`~kesbrdf.render.reference_bsdf`).  Dr.Jit's
 LLVM backend needs LLVM ≥ 17 (DESIGN §7); when ``DRJIT_LIBLLVM_PATH`` is unset and
 Debian's ``libllvm19`` is installed, it is pointed at that library.
 
@@ -37,5 +40,9 @@ _reference_bsdf.register()
 from kesbrdf.render import halfdiff_bsdf as _halfdiff_bsdf  # noqa: E402
 
 _halfdiff_bsdf.register()
+
+from kesbrdf.render import prior_bsdf as _prior_bsdf  # noqa: E402
+
+_prior_bsdf.register()
 
 __all__ = ["KesBSDF", "register", "VARIANT"]

@@ -68,7 +68,7 @@ from kesbrdf.errors import ModelError, validate_choice, where
 from kesbrdf.kinds import require_kind
 from kesbrdf.render import sampling as _sampling
 
-__all__ = ["FabricBSDF", "KesBSDF", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
+__all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model", "PLUGINS"]
 
 MAPPINGS = ("deviation", "halfvector")
 #: Model kinds the plugin evaluates (the ``kes`` table).
@@ -116,11 +116,17 @@ def model_rgb(model, source=None):
     )
 
 
+#: The Mitsuba plugin drawing each renderable model kind.
+PLUGINS = {"kes": "kesbrdf", "kes-halfdiff": "kesbrdf_halfdiff", "fibre-prior": "kesbrdf_prior"}
+
+
 def check_model(path, mapping: str = "deviation"):
     """Load and check a model for the renderer before Mitsuba sees it.
 
     Errors raised inside a plugin constructor reach Python as Mitsuba's RuntimeError
-    with a traceback; checking first gives the CLI a one-line ModelError.
+    with a traceback; checking first gives the CLI a one-line ModelError.  Every kind of
+    :data:`PLUGINS` is accepted (``model.kind`` says which plugin draws it); ``mapping``
+    applies to the ``kes`` kind only.
     """
     from kesbrdf.model import load
 
@@ -130,8 +136,61 @@ def check_model(path, mapping: str = "deviation"):
     if mapping not in MAPPINGS:
         raise ModelError(f"unknown mapping {mapping!r}; the renderer supports {', '.join(MAPPINGS)}")
     model = load(path)
-    model_rgb(model, path)
+    kind = getattr(model, "kind", "kes")
+    require_kind(model, tuple(PLUGINS), "the renderer", path)
+    if kind == "kes":
+        model_rgb(model, path)
+    elif model.n_channels not in (1, 3):
+        raise ModelError(f"{where(path)}the renderer needs a model with 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
     return model
+
+
+def phi_gamma(wi, wr, mapping: str = "deviation"):
+    """(φ, γ) of light ω_i and viewer ω_r in Dr.Jit, as :func:`kesbrdf.mappings.to_phi_gamma`
+    (formats.md step 1); φ ∈ [0, 2π), the plane of incidence ω_r − ω_i where the
+    azimuth vector vanishes."""
+    plane = wr - wi
+    s = wi + wr
+    if mapping == "deviation":
+        m = mi.Vector3f(-wi.x, -wi.y, wi.z)
+        gamma = dr.atan2(dr.norm(dr.cross(wr, m)), dr.dot(wr, m))
+    else:
+        gamma = 2.0 * dr.atan2(dr.norm(mi.Vector2f(s.x, s.y)), s.z)
+    small = dr.norm(mi.Vector2f(s.x, s.y)) < AZIMUTH_EPS
+    x = dr.select(small, plane.x, s.x)
+    y = dr.select(small, plane.y, s.y)
+    phi = dr.atan2(y, x)
+    phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
+    return phi, gamma
+
+
+class KesTable:
+    """A KES table q(φ, γ), shape (n_phi, n_gamma, 3), read bilinearly in Dr.Jit.
+
+    φ is periodic (a ``mi.Texture2f`` whose first φ row is repeated after the last, so
+    clamping equals periodic wrapping), γ is clamped to the uniform grid [0, γ_max]:
+    :func:`kesbrdf.model.lookup` in single precision.  Used by the ``kesbrdf`` plugin
+    for the lobe and by the ``kesbrdf_prior`` plugin for the residual.
+    """
+
+    def __init__(self, table, gamma_grid):
+        table = np.asarray(table, float)
+        self.n_phi, self.n_gamma = table.shape[:2]
+        self.gamma_max = float(gamma_grid[-1])
+        self.dgamma = float(gamma_grid[1] - gamma_grid[0])
+        padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
+        self.texture = mi.Texture2f(
+            mi.TensorXf(padded), use_accel=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp
+        )
+
+    def __call__(self, phi, gamma):
+        """q(φ, γ) → Color3f."""
+        u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
+        v = dr.clip(gamma, 0.0, self.gamma_max) * (1.0 / self.dgamma)
+        v = dr.clip(v, 0.0, float(self.n_gamma - 1))
+        pos = mi.Point2f((v + 0.5) / self.n_gamma, (u + 0.5) / (self.n_phi + 1))
+        r, g, b = self.texture.eval(pos)
+        return mi.Color3f(r, g, b)
 
 
 def _prop(props, name, default=None):
@@ -244,17 +303,8 @@ class KesBSDF(FabricBSDF):
         self.lobe_tint = tint
         table = np.clip(np.nan_to_num(table * tint), 0.0, None)
 
-        n_phi, n_gamma = table.shape[:2]
-        self.n_phi, self.n_gamma = n_phi, n_gamma
-        self.gamma_max = float(model.gamma_grid[-1])
-        self.dgamma = float(model.gamma_grid[1] - model.gamma_grid[0])
-        padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
-        self.texture = mi.Texture2f(
-            mi.TensorXf(padded),
-            use_accel=False,
-            filter_mode=dr.FilterMode.Linear,
-            wrap_mode=dr.WrapMode.Clamp,
-        )
+        self.table = KesTable(table, model.gamma_grid)
+        self.gamma_max = self.table.gamma_max
         self.body = mi.Color3f(*[float(b) for b in body])
 
         q_mean = table.mean(axis=-1)
@@ -283,29 +333,11 @@ class KesBSDF(FabricBSDF):
     # -- evaluation ------------------------------------------------------------
     def _phi_gamma(self, wi, wr):
         """(φ, γ) of light ω_i and viewer ω_r, formats.md step 1."""
-        plane = wr - wi
-        if self.mapping == "deviation":
-            m = mi.Vector3f(-wi.x, -wi.y, wi.z)
-            gamma = dr.atan2(dr.norm(dr.cross(wr, m)), dr.dot(wr, m))
-            s = wi + wr
-        else:
-            s = wi + wr
-            gamma = 2.0 * dr.atan2(dr.norm(mi.Vector2f(s.x, s.y)), s.z)
-        small = dr.norm(mi.Vector2f(s.x, s.y)) < AZIMUTH_EPS
-        x = dr.select(small, plane.x, s.x)
-        y = dr.select(small, plane.y, s.y)
-        phi = dr.atan2(y, x)
-        phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
-        return phi, gamma
+        return phi_gamma(wi, wr, self.mapping)
 
     def lobe_q(self, phi, gamma):
         """Bilinear table lookup q(φ, γ) → Color3f (formats.md step 2)."""
-        u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
-        v = dr.clip(gamma, 0.0, self.gamma_max) * (1.0 / self.dgamma)
-        v = dr.clip(v, 0.0, float(self.n_gamma - 1))
-        pos = mi.Point2f((v + 0.5) / self.n_gamma, (u + 0.5) / (self.n_phi + 1))
-        r, g, b = self.texture.eval(pos)
-        q = mi.Color3f(r, g, b)
+        q = self.table(phi, gamma)
         if self.extrapolation == "fade":
             q = q * dr.clip(1.0 - (gamma - self.gamma_max) * (1.0 / math.radians(FADE_DEG)), 0.0, 1.0)
         return q

@@ -13,7 +13,13 @@ Chain (one call, :func:`compare_render`):
      fitted with :func:`kesbrdf.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
      rendered by the ``kesbrdf_halfdiff`` plugin (:mod:`kesbrdf.render.halfdiff_bsdf`).
 
-   Both fits use ``fallback="log"`` (DESIGN §3) and ``body="auto"``.
+   Both fits use ``fallback="log"`` (DESIGN §3) and ``body="auto"``.  With
+   ``models=("kes", "fibre-prior")`` the same measurement is also fitted with the fibre
+   prior times its residual (:meth:`kesbrdf.prior_model.FibrePriorModel.fit_measurement`,
+   kind ``fibre-prior``: a KES residual table on the paper protocol, a half/difference
+   one on the dense grid) and rendered by the ``kesbrdf_prior`` plugin
+   (:mod:`kesbrdf.render.prior_bsdf`), so each model is scored against the same
+   reference render and the same noise floor.
 3. Render the scene with the reference as the cloth's BSDF (seed s), then with the
    model (seed s + 1), same camera, lights and spp.  A third render, the reference with
    seed s + 1, gives the *noise floor*: the same metrics between two renders that differ
@@ -31,8 +37,8 @@ A satin's narrow highlight therefore sits just below white and the body shows as
 dark value it has; the same scale is applied to the model image, so a model that loses
 the highlight looks it.
 
-Outputs: one PNG panel (reference | model | FLIP map, labelled with the numbers) and a
-JSON file with the numbers and how they were made.
+Outputs: one PNG panel (reference | model | FLIP map, one model and map pair per
+model, labelled with the numbers) and a JSON file with the numbers and how they were made.
 """
 
 from __future__ import annotations
@@ -55,6 +61,7 @@ from kesbrdf.render.reference_bsdf import make_reference, reference_bsdf_dict  #
 
 __all__ = [
     "PROTOCOLS",
+    "MODELS",
     "DEFAULT_REFERENCES",
     "default_options",
     "fit_reference_model",
@@ -69,6 +76,13 @@ __all__ = [
 ]
 
 PROTOCOLS = ("paper", "dense")
+#: Models a comparison can render: ``kes`` (the protocol's KES kind: ``kes`` on the
+#: paper protocol, ``kes-halfdiff`` on the dense grid), ``fibre-prior`` (prior × residual)
+#: and ``prior-only`` (the same kind fitted with ``residual=False``: the pure prior).
+MODELS = ("kes", "fibre-prior", "prior-only")
+#: Panel titles of the models (by model kind for ``kes``).
+MODEL_TITLES = {"kes": "KES", "kes-halfdiff": "KES half/diff", "fibre-prior": "prior+residual",
+                "prior-only": "prior only"}
 #: References compared by default (the CLI's, the satins, one felt).
 DEFAULT_REFERENCES = ("satin-ward", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin", "rgl-felt-white")
 #: Displayed value of the reference's 99.5th-percentile cloth luminance (auto exposure).
@@ -86,13 +100,23 @@ def default_options(**kw) -> "_scenes.RenderOptions":
     return _scenes.RenderOptions(**base)
 
 
-def fit_reference_model(ref, protocol: str = "paper"):
-    """Measure ``ref`` virtually and fit the model of that protocol; returns (model, n_samples)."""
+def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measurement=None):
+    """Measure ``ref`` virtually and fit ``model`` (one of :data:`MODELS`) for that protocol.
+
+    ``measurement`` reuses a measurement of ``ref`` with that protocol.  Returns
+    (fitted model, n_samples).
+    """
     from kesbrdf.gonio import measure
 
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
-    m = measure(ref, protocol=protocol)
+    if model not in MODELS:
+        raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
+    m = measurement if measurement is not None else measure(ref, protocol=protocol)
+    if model in ("fibre-prior", "prior-only"):
+        from kesbrdf.prior_model import FibrePriorModel
+
+        return FibrePriorModel.fit_measurement(m, residual=model == "fibre-prior"), len(m)
     if protocol == "paper":
         from kesbrdf.model import fit
 
@@ -103,18 +127,9 @@ def fit_reference_model(ref, protocol: str = "paper"):
 
 
 def model_bsdf_dict(model_path, kind: str, opts: "_scenes.RenderOptions") -> dict:
-    """The plugin entry rendering a saved model of kind ``kes`` or ``kes-halfdiff``."""
-    if kind == "kes":
-        return _scenes.bsdf_dict(model_path, opts)
-    if kind == "kes-halfdiff":
-        d = {"type": "kesbrdf_halfdiff", "filename": str(model_path), "two_sided": bool(opts.two_sided),
-             "sampling": opts.sampling}
-        if opts.base_color is not None:
-            d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
-        if opts.extrapolation != "hold":
-            d["extrapolation"] = opts.extrapolation
-        return d
-    raise KesbrdfError(f"the renderer draws models of kind 'kes' or 'kes-halfdiff', got {kind!r}")
+    """The plugin entry rendering a saved model of kind ``kes``, ``kes-halfdiff`` or
+    ``fibre-prior`` (:func:`kesbrdf.render.scenes.bsdf_dict`)."""
+    return _scenes.bsdf_dict(model_path, opts, kind)
 
 
 def cloth_mask(scene: "mi.Scene", shape_id: str = "cloth") -> np.ndarray:
@@ -177,8 +192,8 @@ def compare_images(reference: np.ndarray, test: np.ndarray, mask: np.ndarray, ex
 
 
 def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere", opts=None,
-                   output=None, params=None, noise_floor: bool = True) -> dict:
-    """Render ``scene`` with the reference and with its fitted model; compare.
+                   output=None, params=None, noise_floor: bool = True, models=("kes",)) -> dict:
+    """Render ``scene`` with the reference and with its fitted model(s); compare.
 
     Parameters
     ----------
@@ -195,45 +210,62 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         PNG panel to write; the numbers go next to it as ``<stem>.json``.
     noise_floor : bool
         Also render the reference with another seed (module docstring, step 3).
+    models : sequence of :data:`MODELS`
+        Models fitted to the one measurement and rendered (default the KES kind alone).
 
     Returns
     -------
     dict
-        ``flip``, ``rel_rmse`` (model vs reference), ``noise_flip``, ``noise_rel_rmse``,
-        ``exposure`` (stops), ``cloth_pixels``, the reference, protocol, scene, options,
-        and the model's kind and sample count; plus the panel and JSON paths.
+        ``flip``, ``rel_rmse`` (the first model vs the reference), ``noise_flip``,
+        ``noise_rel_rmse``, ``exposure`` (stops), ``cloth_pixels``, the reference,
+        protocol, scene, options, the first model's kind and the sample count;
+        ``models``: {name: {"kind", "flip", "rel_rmse"}} for every model; plus the panel
+        and JSON paths.
     """
+    from kesbrdf.gonio import measure
+
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
+    models = tuple(models)
+    bad = [mo for mo in models if mo not in MODELS] or ([] if models else ["(none)"])
+    if bad or len(set(models)) != len(models):
+        raise KesbrdfError(f"compare: expected distinct models from {', '.join(MODELS)}, got {', '.join(models) or '(none)'}")
     opts = (opts or default_options()).validate()
     ref = make_reference(reference, params)
-    model, n_samples = fit_reference_model(ref, protocol)
-    kind = getattr(model, "kind", "kes")
+    m = measure(ref, protocol=protocol)
+    fitted = {mo: fit_reference_model(ref, protocol, mo, m)[0] for mo in models}
+    n_samples = len(m)
+    # the models and the second reference use the same other seed: the comparisons
+    # then differ only in the cloth's BSDF, not in the noise
+    o2 = replace(opts, seed=int(opts.seed) + 1)
+    images = {}
     with tempfile.TemporaryDirectory(prefix="kesbrdf-compare-") as tmp:
-        model_path = Path(tmp) / ("model.kes.json" if kind == "kes" else "model.halfdiff.kes.json")
-        model.save(model_path)
         ref_bsdf = reference_bsdf_dict(reference, two_sided=opts.two_sided, params=params, sampling=opts.sampling)
         ref_scene = _scenes.load_scene(None, scene, opts, cloth_bsdf=ref_bsdf)
         mask = cloth_mask(ref_scene)
         img_ref = _scenes.render_scene(ref_scene, opts)
-        # the model and the second reference use the same other seed: the two
-        # comparisons then differ only in the cloth's BSDF, not in the noise
-        o2 = replace(opts, seed=int(opts.seed) + 1)
-        mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, kind, o2))
-        img_mod = _scenes.render_scene(mod_scene, o2)
+        for mo, model in fitted.items():
+            kind = getattr(model, "kind", "kes")
+            model_path = Path(tmp) / f"{mo}.kes.json"
+            model.save(model_path)
+            mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, kind, o2))
+            images[mo] = _scenes.render_scene(mod_scene, o2)
         img_ref2 = None
         if noise_floor:
             img_ref2 = _scenes.render_scene(_scenes.load_scene(None, scene, o2, cloth_bsdf=ref_bsdf), o2)
     exposure = auto_exposure(img_ref, mask) + float(opts.exposure)
-    res = compare_images(img_ref, img_mod, mask, exposure)
+    results = {mo: compare_images(img_ref, img, mask, exposure) for mo, img in images.items()}
+    first = results[models[0]]
     out = {
         "reference": reference,
         "protocol": protocol,
         "scene": scene,
-        "model_kind": kind,
+        "model_kind": getattr(fitted[models[0]], "kind", "kes"),
         "samples": n_samples,
-        "flip": res["flip"],
-        "rel_rmse": res["rel_rmse"],
+        "flip": first["flip"],
+        "rel_rmse": first["rel_rmse"],
+        "models": {mo: {"kind": getattr(fitted[mo], "kind", "kes"), "flip": r["flip"], "rel_rmse": r["rel_rmse"]}
+                   for mo, r in results.items()},
         "exposure": exposure,
         "cloth_pixels": int(mask.sum()),
         "options": opts.to_json(),
@@ -243,10 +275,13 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         noise = compare_images(img_ref, img_ref2, mask, exposure)
         out["noise_flip"] = noise["flip"]
         out["noise_rel_rmse"] = noise["rel_rmse"]
-    out["_images"] = {"reference": img_ref, "model": img_mod, "mask": mask}
+    out["_images"] = {"reference": img_ref, "model": images[models[0]], "mask": mask,
+                      **{f"model:{mo}": img for mo, img in images.items()}}
     if output is not None:
         output = Path(output)
-        write_panel(output, res["_ref8"], res["_test8"], res["_magma"], out)
+        columns = [(f"{MODEL_TITLES[out['models'][mo]['kind'] if mo == 'kes' else mo]} model ({protocol})", results[mo])
+                   for mo in models]
+        write_panel(output, first["_ref8"], first["_test8"], first["_magma"], out, columns=columns)
         meta = {k: v for k, v in out.items() if not k.startswith("_")}
         json_path = output.with_suffix(".json")
         write_text(json_path, json.dumps(meta, indent=1, default=str) + "\n")
@@ -255,25 +290,39 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     return out
 
 
-def write_panel(path, ref8: np.ndarray, model8: np.ndarray, flip8: np.ndarray, numbers: dict) -> Path:
-    """Write reference | model | FLIP map side by side, labelled, as a PNG (atomically)."""
+def write_panel(path, ref8: np.ndarray, model8: np.ndarray, flip8: np.ndarray, numbers: dict,
+                columns=None) -> Path:
+    """Write reference | model | FLIP map side by side, labelled, as a PNG (atomically).
+
+    ``columns``, a list of (title, :func:`compare_images` result), draws one model and
+    FLIP map pair per entry instead of ``model8``/``flip8``.
+    """
     from PIL import Image, ImageDraw
     from PIL.PngImagePlugin import PngInfo
 
     path = Path(path)
     if path.suffix.lower() != ".png":
         raise KesbrdfError(f"compare: expected a panel file ending .png, got {path.name!r}")
+    if columns is None:
+        kind = "KES" if numbers.get("protocol") == "paper" else "KES half/diff"
+        columns = [(f"{kind} model ({numbers.get('protocol')})",
+                    {"_test8": model8, "_magma": flip8, "flip": numbers["flip"], "rel_rmse": numbers["rel_rmse"]})]
     h, w = ref8.shape[:2]
     band = 14
-    panel = Image.new("RGB", (3 * w, h + 2 * band), (16, 16, 16))
-    for k, img in enumerate((ref8, model8, flip8)):
+    n = 1 + 2 * len(columns)
+    panel = Image.new("RGB", (n * w, h + 2 * band), (16, 16, 16))
+    images = [ref8] + [img for _, r in columns for img in (r["_test8"], r["_magma"])]
+    titles = [f"reference: {numbers.get('reference')}"] + [t for title, _ in columns for t in (title, "FLIP error")]
+    for k, img in enumerate(images):
         panel.paste(Image.fromarray(np.ascontiguousarray(img[..., :3])), (k * w, band))
     draw = ImageDraw.Draw(panel)
-    kind = "KES" if numbers.get("protocol") == "paper" else "KES half/diff"
-    titles = (f"reference: {numbers.get('reference')}", f"{kind} model ({numbers.get('protocol')})", "FLIP error")
     for k, t in enumerate(titles):
         draw.text((k * w + 3, 1), t, fill=(230, 230, 230))
-    text = f"FLIP {numbers['flip']:.3f}  relRMSE {numbers['rel_rmse']:.3f}"
+    if len(columns) == 1:
+        text = f"FLIP {columns[0][1]['flip']:.3f}  relRMSE {columns[0][1]['rel_rmse']:.3f}"
+    else:
+        text = "   ".join(f"{title.split(' model')[0]}: FLIP {r['flip']:.3f} relRMSE {r['rel_rmse']:.3f}"
+                           for title, r in columns)
     if "noise_flip" in numbers:
         text += f"   noise floor: FLIP {numbers['noise_flip']:.3f}  relRMSE {numbers['noise_rel_rmse']:.3f}"
     draw.text((3, h + band + 1), text, fill=(230, 230, 230))

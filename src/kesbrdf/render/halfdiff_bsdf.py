@@ -39,7 +39,7 @@ from kesbrdf.errors import ModelError, where
 from kesbrdf.render import sampling as _sampling
 from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, parse_rgb
 
-__all__ = ["HalfDiffBSDF", "register", "check_halfdiff_model"]
+__all__ = ["HalfDiffBSDF", "HalfDiffTable", "half_diff", "register", "check_halfdiff_model"]
 
 
 def _prop(props, name, default=None):
@@ -56,6 +56,52 @@ def check_halfdiff_model(path):
     if model.table.shape[-1] not in (1, 3):
         raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.table.shape[-1]}")
     return model
+
+
+def half_diff(wi, wr):
+    """(φ_h, θ_h, θ_d) of light ω_i and viewer ω_r in Dr.Jit, as
+    :func:`kesbrdf.mappings.to_half_diff`: h = ω_i + ω_r, φ_h its azimuth (the plane of
+    incidence ω_r − ω_i where h ∥ z), θ_h = angle(h, z), θ_d = half the angle ω_i, ω_r."""
+    h = wi + wr
+    plane = wr - wi
+    hxy = dr.norm(mi.Vector2f(h.x, h.y))
+    small = hxy < AZIMUTH_EPS
+    phi = dr.atan2(dr.select(small, plane.y, h.y), dr.select(small, plane.x, h.x))
+    phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
+    theta_h = dr.atan2(hxy, h.z)
+    theta_d = 0.5 * dr.atan2(dr.norm(dr.cross(wi, wr)), dr.dot(wi, wr))
+    return phi, theta_h, theta_d
+
+
+class HalfDiffTable:
+    """A table T(φ_h, θ_h, θ_d), shape (n_phi, n_h, n_d, 3), read trilinearly in Dr.Jit.
+
+    φ periodic through a repeated first φ slice of a ``mi.Texture3f``; θ_h and θ_d
+    clamped to their uniform grids: :func:`kesbrdf.halfdiff.lookup_halfdiff` in single
+    precision.  Used by the ``kesbrdf_halfdiff`` plugin for the lobe and by the
+    ``kesbrdf_prior`` plugin for a dense fit's residual.
+    """
+
+    def __init__(self, table, theta_h_grid, theta_d_grid):
+        table = np.asarray(table, float)
+        self.n_phi, self.n_h, self.n_d = table.shape[:3]
+        self.h_max = float(theta_h_grid[-1])
+        self.d_max = float(theta_d_grid[-1])
+        self.dh = float(theta_h_grid[1] - theta_h_grid[0])
+        self.dd = float(theta_d_grid[1] - theta_d_grid[0])
+        padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
+        self.texture = mi.Texture3f(
+            mi.TensorXf(padded), use_accel=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp
+        )
+
+    def __call__(self, phi, theta_h, theta_d):
+        """T(φ_h, θ_h, θ_d) → Color3f."""
+        u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
+        v = dr.clip(dr.clip(theta_h, 0.0, self.h_max) * (1.0 / self.dh), 0.0, float(self.n_h - 1))
+        w = dr.clip(dr.clip(theta_d, 0.0, self.d_max) * (1.0 / self.dd), 0.0, float(self.n_d - 1))
+        pos = mi.Point3f((w + 0.5) / self.n_d, (v + 0.5) / self.n_h, (u + 0.5) / (self.n_phi + 1))
+        r, g, b = self.texture.eval(pos)
+        return mi.Color3f(r, g, b)
 
 
 class HalfDiffBSDF(FabricBSDF):
@@ -86,16 +132,8 @@ class HalfDiffBSDF(FabricBSDF):
                 f"kesbrdf_halfdiff BSDF: unknown extrapolation {self.extrapolation!r}; "
                 f"expected one of {', '.join(EXTRAPOLATIONS)}"
             )
-        n_phi, n_h, n_d = table.shape[:3]
-        self.n_phi, self.n_h, self.n_d = n_phi, n_h, n_d
-        self.h_max = float(model.theta_h_grid[-1])
-        self.d_max = float(model.theta_d_grid[-1])
-        self.dh = float(model.theta_h_grid[1] - model.theta_h_grid[0])
-        self.dd = float(model.theta_d_grid[1] - model.theta_d_grid[0])
-        padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
-        self.texture = mi.Texture3f(
-            mi.TensorXf(padded), use_accel=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp
-        )
+        self.table = HalfDiffTable(table, model.theta_h_grid, model.theta_d_grid)
+        self.h_max = self.table.h_max
         self.body = mi.Color3f(*[float(b) for b in body])
 
         sampling = str(_prop(props, "sampling", "lobe"))
@@ -122,20 +160,8 @@ class HalfDiffBSDF(FabricBSDF):
     def f_r(self, wi, wr, active=True):
         """f_r (1/sr) for light ω_i and viewer ω_r in the fabric frame."""
         above = (wi.z > 0.0) & (wr.z > 0.0) & active
-        h = wi + wr
-        plane = wr - wi
-        hxy = dr.norm(mi.Vector2f(h.x, h.y))
-        small = hxy < AZIMUTH_EPS
-        phi = dr.atan2(dr.select(small, plane.y, h.y), dr.select(small, plane.x, h.x))
-        phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
-        theta_h = dr.atan2(hxy, h.z)
-        theta_d = 0.5 * dr.atan2(dr.norm(dr.cross(wi, wr)), dr.dot(wi, wr))
-        u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
-        v = dr.clip(dr.clip(theta_h, 0.0, self.h_max) * (1.0 / self.dh), 0.0, float(self.n_h - 1))
-        w = dr.clip(dr.clip(theta_d, 0.0, self.d_max) * (1.0 / self.dd), 0.0, float(self.n_d - 1))
-        pos = mi.Point3f((w + 0.5) / self.n_d, (v + 0.5) / self.n_h, (u + 0.5) / (self.n_phi + 1))
-        r, g, b = self.texture.eval(pos)
-        q = mi.Color3f(r, g, b)
+        phi, theta_h, theta_d = half_diff(wi, wr)
+        q = self.table(phi, theta_h, theta_d)
         if self.extrapolation == "fade":
             q = q * dr.clip(1.0 - (theta_h - self.h_max) * (2.0 / math.radians(FADE_DEG)), 0.0, 1.0)
         if self.sqrtcos:

@@ -185,15 +185,30 @@ def _guess_up_axis(first, last) -> str:
 
 
 # -- pieces of scene dicts ----------------------------------------------------------
-def bsdf_dict(model_path, opts: RenderOptions) -> dict:
-    """The ``kesbrdf`` BSDF entry for a model file and the colour options."""
+def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
+    """The BSDF entry for a model file and the colour options.
+
+    The plugin follows the model's kind (:data:`kesbrdf.render.bsdf.PLUGINS`): ``kesbrdf``
+    for ``kes`` (with ``opts.mapping``), ``kesbrdf_halfdiff`` for ``kes-halfdiff``,
+    ``kesbrdf_prior`` for ``fibre-prior``.  ``kind`` saves reading the file again when the
+    caller knows it.
+    """
+    from kesbrdf.render.bsdf import PLUGINS
+
+    if kind is None:
+        from kesbrdf.model import load
+
+        kind = getattr(load(Path(model_path)), "kind", "kes")
+    if kind not in PLUGINS:
+        raise KesbrdfError(f"the renderer draws models of kind {', '.join(map(repr, PLUGINS))}, got {kind!r}")
     d = {
-        "type": "kesbrdf",
+        "type": PLUGINS[kind],
         "filename": str(model_path),
-        "mapping": opts.mapping,
         "two_sided": bool(opts.two_sided),
         "sampling": opts.sampling,
     }
+    if kind == "kes":
+        d["mapping"] = opts.mapping
     if opts.extrapolation != "hold":
         d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
@@ -359,8 +374,8 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
     if cloth_bsdf is None:
         from kesbrdf.render.bsdf import check_model
 
-        check_model(model_path, opts.mapping)
-    bsdf = cloth_bsdf if cloth_bsdf is not None else bsdf_dict(model_path, opts)
+        kind = getattr(check_model(model_path, opts.mapping), "kind", "kes")
+    bsdf = cloth_bsdf if cloth_bsdf is not None else bsdf_dict(model_path, opts, kind)
     if isinstance(drape, (str, Path)):
         drape = read_drape(drape)
     shapes: dict = {}

@@ -1,0 +1,359 @@
+r"""The ``kesbrdf_prior`` BSDF: a ``fibre-prior`` model file as a Mitsuba 3 plugin.
+
+Evaluation is :meth:`kesbrdf.prior_model.FibrePriorModel.evaluate` in Dr.Jit (single
+precision):
+
+.. math::
+
+    f_r(\omega_i, \omega_r) = f_\text{prior}(\omega_i, \omega_r)\cdot r(\omega_i, \omega_r)^{\tau}
+
+* :math:`f_\text{prior} = k_d + \Phi(\theta_d)\sum_j k_{s,j} S_j` as
+  :func:`kesbrdf.prior.evaluate_batch` (docs/prior.md): a filament family in closed form
+  (u* = atan2(h'_y, h'_z), Ā the mean of the Seeliger law over the fixed
+  :data:`kesbrdf.prior.N_V` across-yarn nodes); a staple family as the fixed
+  :data:`kesbrdf.prior.N_U`-node tilt quadrature, a Python loop over the nodes that builds
+  one Dr.Jit expression (the tilt profile P(u)·Δu of each node is a constant of the
+  fitted model, computed once in float64).
+* r is the residual table, read by the lookup code of the other plugins:
+  :class:`kesbrdf.render.bsdf.KesTable` over (deviation φ, γ) for a paper-protocol fit,
+  divided by the line weight √((cos γ + cos S)/2); :class:`kesbrdf.render.halfdiff_bsdf.HalfDiffTable`
+  over (φ_h, θ_h, θ_d) for a dense fit.  The relaxation τ is
+  :data:`kesbrdf.prior_model.RELAX_DEG`'s smoothstep beyond the measured γ (or θ_h),
+  as in :meth:`~kesbrdf.prior_model.FibrePriorModel.residual_ratio`.
+
+Frames as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp (the family at
+α = 0); ``si.wi`` is the viewer ω_r, ``wo`` the light ω_i; two-sided mirroring, ``eval``,
+``pdf`` and ``sample`` come from :class:`~kesbrdf.render.bsdf.FabricBSDF`.
+
+Colour.  The body of this kind is the fitted Lambertian k_d; the lobe is everything
+above it, L = f_r − k_d (the specular families and what the residual adds or removes).
+``base_color`` replaces k_d by base_color/π and ``lobe_tint`` multiplies L:
+f = max(0, c + t·L).  Unset, f is the model's f_r exactly.
+
+Sampling: the mixture of :mod:`kesbrdf.render.sampling` with the ``halfvector`` lobe
+(the fibre highlights live in the half vector), whose (φ_h, γ = 2θ_h) density is
+:func:`lobe_table`: the lobe L·√(cos θ_i cos θ_r) averaged over a few difference
+directions.  The pdf is the sampler's own, exact, whatever the density table is.
+
+Parameters (scene description): ``filename`` (a ``fibre-prior`` model file),
+``base_color``, ``lobe_tint``, ``two_sided``, ``sampling`` (``lobe`` or ``cosine``), as
+the ``kesbrdf`` plugin.  ``extrapolation`` is accepted and ignored: the residual relaxes
+to 1 by itself beyond the measured range, and the prior is defined everywhere.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+import drjit as dr
+import mitsuba as mi
+
+from kesbrdf.errors import ModelError, where
+from kesbrdf.render import sampling as _sampling
+from kesbrdf.render.bsdf import EXTRAPOLATIONS, SAMPLINGS, FabricBSDF, KesTable, parse_rgb, phi_gamma
+from kesbrdf.render.halfdiff_bsdf import HalfDiffTable, half_diff
+
+__all__ = ["FibrePriorBSDF", "register", "check_prior_model", "lobe_table", "PLUGIN"]
+
+#: Name of the plugin.
+PLUGIN = "kesbrdf_prior"
+#: Half-vector grid of the sampling density: φ_h step and θ_h step, degrees; θ_h up to
+#: LOBE_THETA_H_MAX (beyond, h near the horizon reflects most viewers below it).
+LOBE_DPHI_DEG = 2.5
+LOBE_DTHETA_DEG = 1.5
+LOBE_THETA_H_MAX_DEG = 81.0
+#: Difference directions (θ_d, φ_d) the density averages over, degrees.
+LOBE_THETA_D_DEG = (10.0, 30.0, 50.0)
+LOBE_PHI_D_DEG = (0.0, 90.0)
+
+
+def _prop(props, name, default=None):
+    return props[name] if name in props else default
+
+
+def _rgb(a):
+    a = np.asarray(a, float)
+    return np.repeat(a, 3, axis=-1) if a.shape[-1] == 1 else a
+
+
+def check_prior_model(path):
+    """Load a model file and check that it is a ``fibre-prior`` model with 1 or 3 channels."""
+    from kesbrdf.model import load
+
+    model = load(Path(path))
+    if getattr(model, "kind", "kes") != "fibre-prior":
+        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r}")
+    if model.n_channels not in (1, 3):
+        raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
+    return model
+
+
+def lobe_table(model):
+    """Sampling density nodes of a fibre-prior model: (q̄ (n_phi, n_h), φ_h grid, γ = 2θ_h grid).
+
+    q̄ is the channel mean of max(0, f_r − k_d)·√(cos θ_i cos θ_r) (the ``kes-halfdiff``
+    table's normalisation) at the half vector (φ_h, θ_h), averaged over the difference
+    directions :data:`LOBE_THETA_D_DEG` × :data:`LOBE_PHI_D_DEG` (pairs below the horizon
+    count 0), evaluated with the numpy model.
+    """
+    phi = np.radians(np.arange(0.0, 360.0, LOBE_DPHI_DEG))
+    th = np.radians(np.arange(0.0, LOBE_THETA_H_MAX_DEG + 1e-9, LOBE_DTHETA_DEG))
+    td, pd = (np.radians(a).ravel() for a in np.meshgrid(LOBE_THETA_D_DEG, LOBE_PHI_D_DEG, indexing="ij"))
+    # d in the half-vector frame (K, 3), rotated by θ_h about y, then by φ_h about z (Rusinkiewicz)
+    dx, dy, dz = np.sin(td) * np.cos(pd), np.sin(td) * np.sin(pd), np.cos(td)
+    ct, st = np.cos(th)[None, :, None], np.sin(th)[None, :, None]
+    cp, sp = np.cos(phi)[:, None, None], np.sin(phi)[:, None, None]
+    x = dx * ct + dz * st
+    z = -dx * st + dz * ct + 0.0 * cp
+    y = dy + 0.0 * x
+    wi = np.stack([x * cp - y * sp, x * sp + y * cp, z], -1)  # (n_phi, n_h, K, 3)
+    h = np.stack([st * cp, st * sp, ct + 0.0 * cp], -1)
+    wr = 2.0 * np.sum(wi * h, -1, keepdims=True) * h - wi
+    f = model.evaluate(wi, wr)
+    kd = np.exp([model.prior.parameters()[f"log_kd_{c}"] for c in range(model.prior.spec.n_channels)])
+    cos = np.sqrt(np.clip(wi[..., 2] * wr[..., 2], 0.0, None))
+    lobe = np.clip(np.nan_to_num(f - kd), 0.0, None).mean(axis=-1) * cos
+    return lobe.mean(axis=-1), phi, 2.0 * th
+
+
+# -- the prior in Dr.Jit ---------------------------------------------------------------
+def _sigmoid(x):
+    return 0.5 * (1.0 + dr.tanh(0.5 * x))
+
+
+def _seeliger(ci, cr):
+    ok = (ci > 0.0) & (cr > 0.0)
+    return dr.select(ok, ci * cr / dr.select(ok, ci + cr, 1.0), 0.0)
+
+
+def _lobe_rho(cos_phi, rho: float):
+    return (1.0 - rho) ** 2 / (1.0 - 2.0 * rho * cos_phi + rho * rho) + 1e-4
+
+
+def _dot(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _cos_phi(wi, wr, t):
+    """cos of the angle between the projections of ω_i and ω_r on the plane ⟂ t (tuples)."""
+    di, dq = _dot(wi, t), _dot(wr, t)
+    pi = [wi[k] - di * t[k] for k in range(3)]
+    pr = [wr[k] - dq * t[k] for k in range(3)]
+    den = dr.sqrt(_dot(pi, pi) * _dot(pr, pr))
+    return dr.clip(dr.select(den > 1e-30, _dot(pi, pr) / dr.maximum(den, 1e-30), 1.0), -1.0, 1.0)
+
+
+def _fresnel(c, eta: float):
+    c = dr.clip(dr.abs(c), 0.0, 1.0)
+    g = dr.sqrt(dr.maximum(eta * eta - 1.0 + c * c, 0.0))
+    a = (g - c) / (g + c)
+    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
+    return 0.5 * a * a * (1.0 + b * b)
+
+
+def _frame(w, alpha: float):
+    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.prior._family_frame."""
+    s, c = math.sin(alpha), math.cos(alpha)
+    return (s * w.x - c * w.y, c * w.x + s * w.y, w.z)
+
+
+class _Prior:
+    """f_prior of a :class:`kesbrdf.prior.FibrePrior` in Dr.Jit (module docstring)."""
+
+    def __init__(self, prior):
+        from kesbrdf import prior as P
+
+        self.P = P
+        spec = prior.spec
+        p = prior.parameters()
+        C = spec.n_channels
+        self.kd = _rgb(np.exp([p[f"log_kd_{c}"] for c in range(C)]))
+        self.offset = p["axis_offset"] if spec.free_axes else 0.0
+        self.d = (p["d1"], p["d2"]) if spec.free_theta_d else None
+        self.f45 = float(P.fresnel_dielectric(math.cos(math.pi / 4)))
+        self.families = []
+        for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, math.pi / 2)):
+            lo, hi, log_s, c2, rho = (p[f"{fam}_{k}"] for k in ("u_lo", "u_hi", "log_s", "c2", "rho"))
+            ks = _rgb(np.exp([p[f"{fam}_log_ks_{c}"] for c in range(C)]))
+            entry = {"kind": kind, "alpha": alpha + self.offset, "ks": ks, "rho": rho,
+                     "shape": (lo, hi, math.exp(log_s), c2)}
+            if kind == "staple":
+                psi = p[f"{fam}_psi"]
+                # P(u)·Δu at the fixed nodes: constants of the fitted model, in float64
+                w = P._profile(P._U_NODES, lo, hi, log_s, c2) * P._DU
+                entry.update(psi=psi, nodes=[(math.sin(u), math.cos(u), float(wu)) for u, wu in zip(P._U_NODES, w)])
+            self.families.append(entry)
+
+    def _profile(self, u, shape):
+        lo, hi, s, c2 = shape
+        return _sigmoid((u - lo) * (1.0 / s)) * _sigmoid((hi - u) * (1.0 / s)) * dr.exp(dr.clip(c2 * u * u, -700.0, 50.0))
+
+    def _filament(self, fam, h, i, r, norm_sum):
+        hx, hy, hz = h
+        u = dr.atan2(hy, hz)
+        su, cu = dr.sin(u), dr.cos(u)
+        a_bar = 0.0
+        for v in self.P._V_NODES:
+            sv, cv = math.sin(v), math.cos(v)
+            ci = i[0] * sv + (i[1] * su + i[2] * cu) * cv
+            cr = r[0] * sv + (r[1] * su + r[2] * cu) * cv
+            a_bar = a_bar + _seeliger(ci, cr)
+        a_bar = a_bar * (1.0 / self.P.N_V)
+        cphi = _cos_phi(i, r, (0.0, cu, -su))
+        jac = dr.sqrt(dr.maximum(1.0 - hx * hx, 1e-12))
+        return self._profile(u, fam["shape"]) * _lobe_rho(cphi, fam["rho"]) * a_bar / (norm_sum * jac)
+
+    def _staple(self, fam, h, i, r, norm_sum):
+        hx, hy, hz = h
+        psi = fam["psi"]
+        tpsi, sp, cp = math.tan(psi), math.sin(psi), math.cos(psi)
+        total = 0.0
+        for su, cu, weight in fam["nodes"]:
+            if weight == 0.0:
+                continue
+            A = hy * su + hz * cu
+            Bq = hy * cu - hz * su
+            D = Bq / (dr.sqrt(hx * hx + A * A) * tpsi)
+            v = dr.atan2(-A, hx) + dr.acos(dr.clip(D, -1.0, 1.0))
+            ok = (dr.abs(D) < 1.0) & (dr.abs(v) < 0.5 * math.pi)
+            sv, cv = dr.sin(v), dr.cos(v)
+            n = (sv, su * cv, cu * cv)
+            t = (-cv * sp, cu * cp + su * sv * sp, -su * cp + cu * sv * sp)
+            nh = dr.abs(_dot(n, h))
+            g = dr.select(ok, _seeliger(_dot(n, i), _dot(n, r)) / dr.maximum(nh, 1e-9), 0.0)
+            total = total + weight * _lobe_rho(_cos_phi(i, r, t), fam["rho"]) * g
+        return total / (norm_sum * abs(sp))
+
+    def __call__(self, wi, wr):
+        """f_prior (Color3f) for unit directions above the horizon."""
+        s = wi + wr
+        norm_sum = dr.norm(s)
+        h = s / dr.maximum(norm_sum, 1e-30)
+        phi_td = _fresnel(dr.dot(wi, h), self.P.THETA_D_ETA) * (1.0 / self.f45)
+        if self.d is not None:
+            x = dr.dot(wi, wr)
+            phi_td = phi_td * dr.exp(dr.clip(self.d[0] * x + self.d[1] * x * x, -50.0, 50.0))
+        f = mi.Color3f(*[float(k) for k in self.kd])
+        for fam in self.families:
+            hf, i, r = _frame(h, fam["alpha"]), _frame(wi, fam["alpha"]), _frame(wr, fam["alpha"])
+            S = (self._filament if fam["kind"] == "filament" else self._staple)(fam, hf, i, r, norm_sum)
+            f = f + mi.Color3f(*[float(k) for k in fam["ks"]]) * (phi_td * S)
+        return f
+
+
+class _Residual:
+    """r^τ of a fibre-prior model's residual in Dr.Jit (module docstring)."""
+
+    def __init__(self, res):
+        from kesbrdf.prior_model import RELAX_DEG
+
+        self.relax = 1.0 / math.radians(RELAX_DEG)
+        table = np.clip(np.nan_to_num(_rgb(res.table)), 0.0, None)
+        self.mode = getattr(res, "mode", "line")
+        if self.mode == "halfdiff":
+            self.table = HalfDiffTable(table, res.theta_h_grid, res.theta_d_grid)
+            self.limit = float(res.theta_h_max)
+        else:
+            self.table = KesTable(table, res.gamma_grid)
+            self.limit = float(res.gamma_max)
+            self.cos_line = math.cos(float(res.line_sum))
+
+    def __call__(self, wi, wr):
+        if self.mode == "halfdiff":
+            phi, theta_h, theta_d = half_diff(wi, wr)
+            r = self.table(phi, theta_h, theta_d)
+            beyond = theta_h
+        else:
+            phi, gamma = phi_gamma(wi, wr, "deviation")
+            g_in = dr.minimum(gamma, self.limit)
+            weight = dr.sqrt(dr.maximum(0.5 * (dr.cos(g_in) + self.cos_line), 0.0))
+            r = self.table(phi, g_in) / weight
+            beyond = gamma
+        x = dr.clip((beyond - self.limit) * self.relax, 0.0, 1.0)
+        tau = 1.0 - x * x * (3.0 - 2.0 * x)
+        return dr.exp(tau * dr.log(dr.maximum(r, 1e-30)))
+
+
+class FibrePriorBSDF(FabricBSDF):
+    """Mitsuba BSDF of a ``fibre-prior`` model (module docstring)."""
+
+    def __init__(self, props):
+        mi.BSDF.__init__(self, props)
+        filename = _prop(props, "filename")
+        if filename is None:
+            raise ModelError(f"{PLUGIN} BSDF: expected a 'filename' parameter (a model file), got none")
+        path = Path(str(filename))
+        if not path.is_absolute() and not path.exists():
+            path = Path(str(mi.file_resolver().resolve(str(filename))))
+        model = check_prior_model(path)
+        self.filename = str(path)
+        self.two_sided = bool(_prop(props, "two_sided", False))
+        extrapolation = str(_prop(props, "extrapolation", "hold"))
+        if extrapolation not in EXTRAPOLATIONS:
+            raise ModelError(f"{PLUGIN} BSDF: unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}")
+        sampling = str(_prop(props, "sampling", "lobe"))
+        if sampling not in SAMPLINGS:
+            raise ModelError(f"{PLUGIN} BSDF sampling: expected one of {', '.join(SAMPLINGS)}, got {sampling!r}")
+        self.sampling = sampling
+
+        self.prior = _Prior(model.prior)
+        self.residual = None if model.residual is None else _Residual(model.residual)
+        kd = self.prior.kd
+        tint = parse_rgb(_prop(props, "lobe_tint", "1,1,1"), "lobe_tint")
+        base = _prop(props, "base_color")
+        body = kd
+        if base is not None:
+            albedo = parse_rgb(base, "base_color")
+            if np.any(albedo > 1):
+                raise ModelError(f"base_color: expected a body albedo with R,G,B in [0, 1], got {base!r}")
+            body = albedo / math.pi
+        self.recolour = base is not None or not np.all(tint == 1.0)
+        self.kd = mi.Color3f(*[float(k) for k in kd])
+        self.body = mi.Color3f(*[float(b) for b in body])
+        self.tint = mi.Color3f(*[float(t) for t in tint])
+
+        q_mean, phi_grid, gamma_grid = lobe_table(model)
+        q_mean = q_mean * float(np.mean(tint))
+        if sampling == "cosine":
+            weight = 0.0
+        else:
+            lobe = _sampling.lobe_albedo_proxy(q_mean, phi_grid, gamma_grid)
+            weight = _sampling.lobe_weight(lobe, math.pi * float(np.mean(body)))
+        self.sampler = _sampling.LobeSampler(
+            _sampling.lobe_density_table(q_mean, gamma_grid, "halfvector"), float(gamma_grid[-1]), "halfvector", weight
+        )
+        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
+        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        if self.two_sided:
+            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
+            flags_body = flags_body | mi.BSDFFlags.BackSide
+        self.m_components = [flags_lobe, flags_body]
+        self.m_flags = flags_lobe | flags_body
+
+    def f_model(self, wi, wr):
+        """The model's f_r = f_prior · r^τ (Color3f) for unit directions above the horizon."""
+        f = self.prior(wi, wr)
+        if self.residual is not None:
+            f = f * self.residual(wi, wr)
+        return f
+
+    def f_r(self, wi, wr, active=True):
+        """f_r (1/sr, no cosine) for light ω_i and viewer ω_r in the fabric frame."""
+        above = (wi.z > 0.0) & (wr.z > 0.0) & active
+        f = self.f_model(wi, wr)
+        if self.recolour:
+            f = dr.maximum(self.body + self.tint * (f - self.kd), 0.0)
+        ok = above & dr.isfinite(f.x) & dr.isfinite(f.y) & dr.isfinite(f.z)
+        return dr.select(ok, f, 0.0)
+
+    def to_string(self):
+        return (f"FibrePriorBSDF[filename={self.filename!r}, two_sided={self.two_sided}, "
+                f"sampling={self.sampling!r}, lobe_weight={self.sampler.lobe_weight:.3f}]")
+
+
+def register() -> None:
+    """Register the plugin under the name ``kesbrdf_prior`` (idempotent)."""
+    mi.register_bsdf(PLUGIN, lambda props: FibrePriorBSDF(props))

@@ -1,0 +1,189 @@
+"""The ``kesbrdf_prior`` plugin: agreement with FibrePriorModel.evaluate, reciprocity,
+colour, dispatch on the model kind, and chi² sampling."""
+
+import math
+
+import numpy as np
+import pytest
+
+from kesbrdf.geometry import spherical_to_cartesian
+
+pytestmark = pytest.mark.render
+
+#: Relative agreement with the float64 numpy model.  The plugin runs in float32; over
+#: 4000 random pairs the worst relative error measured is 2.5e-5 (paper and dense fits,
+#: filament and staple families: float32 angles through atan2/acos, the Seeliger sums
+#: and the residual's texture coordinates), so 2e-4 leaves an 8x margin.
+EVAL_RTOL = 2e-4
+#: Absolute floor relative to the largest value of the set: where f is 10⁻⁷ of its peak
+#: (a staple fit's k_d is 3e-8 1/sr) float32 rounding of the angles dominates; the
+#: worst absolute error measured is 2.3e-6 of the peak.
+EVAL_ATOL_OF_PEAK = 1e-5
+#: Reciprocity of the plugin: every factor is symmetric in ωi ↔ ωr (docs/prior.md), but
+#: float32 evaluates the two orders with different rounding; measured 3.5e-6 relative.
+RECIP_RTOL = 1e-4
+#: chi² budget, as tests/render/test_sampling.py.
+CHI2_SAMPLES = 200_000
+CHI2_RES = 64
+CHI2_IRES = 16
+
+
+@pytest.fixture(scope="module")
+def prior_files(tmp_path_factory):
+    """Fibre-prior fits of the Sadeghi satin, saved: paper protocol with the BIC's choice
+    (filament/filament, KES residual), paper with a staple warp, a coarse dense grid (15°)
+    with a staple weft (half/difference residual, free θ_d law), and the pure prior of
+    the first."""
+    from kesbrdf.gonio import measure
+    from kesbrdf.prior_model import FibrePriorModel
+    from kesbrdf.render.reference_bsdf import make_reference
+
+    ref = make_reference("sadeghi-satin")
+    paper = measure(ref, protocol="paper")
+    dense = measure(ref, protocol="dense", step_deg=15.0)  # 144 pairs: a 1.7 s fit instead of 6 s
+    models = {
+        "paper-filament": FibrePriorModel.fit_measurement(paper, kinds=("filament", "filament")),
+        "paper-staple": FibrePriorModel.fit_measurement(paper, kinds=("staple", "filament")),
+        "dense-staple": FibrePriorModel.fit_measurement(dense, kinds=("filament", "staple")),
+    }
+    first = models["paper-filament"]
+    models["pure-prior"] = FibrePriorModel(first.prior, None, channels=first.channels)
+    folder = tmp_path_factory.mktemp("prior")
+    out = {}
+    for name, model in models.items():
+        path = folder / f"{name}.kes.json"
+        model.save(path)
+        out[name] = (path, model)
+    return out
+
+
+@pytest.fixture(autouse=True)
+def _in_tmp(tmp_path, monkeypatch):
+    """A failing chi² test writes chi2_data.py into the working directory."""
+    monkeypatch.chdir(tmp_path)
+
+
+def _pairs(rng, n=4000, min_cos=0.05):
+    wi = spherical_to_cartesian(np.arccos(rng.uniform(min_cos, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(np.arccos(rng.uniform(min_cos, 1, n)), rng.uniform(0, 2 * np.pi, n))
+    return wi.astype(np.float32).astype(float), wr.astype(np.float32).astype(float)
+
+
+def _load(path, **kw):
+    import mitsuba as mi
+
+    return mi.load_dict({"type": "kesbrdf_prior", "filename": str(path), **kw})
+
+
+def _eval(bsdf, wi, wr):
+    """Mitsuba eval with si.wi = viewer, wo = light, cosine divided out: f_r, (N, 3)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
+    si.wi = mi.Vector3f(*wr.T)
+    return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T / wi[:, 2:3]
+
+
+@pytest.mark.parametrize("name", ["paper-filament", "paper-staple", "dense-staple", "pure-prior"])
+def test_eval_agrees_with_numpy(render_module, prior_files, rng, name):
+    path, model = prior_files[name]
+    assert model.prior.spec.kinds == {"paper-staple": ("staple", "filament"),
+                                      "dense-staple": ("filament", "staple")}.get(name, ("filament", "filament"))
+    wi, wr = _pairs(rng)
+    got = _eval(_load(path), wi, wr)
+    want = model.evaluate(wi, wr)
+    assert np.all(np.isfinite(got))
+    tol = EVAL_RTOL * np.abs(want) + EVAL_ATOL_OF_PEAK * np.abs(want).max()
+    err = np.abs(got - want)
+    assert not (err > tol).any(), (name, float(np.max(err / np.maximum(np.abs(want), 1e-30))))
+
+
+@pytest.mark.parametrize("name", ["paper-filament", "dense-staple"])
+def test_reciprocal(render_module, prior_files, rng, name):
+    wi, wr = _pairs(rng, 2000)
+    bsdf = _load(prior_files[name][0])
+    a, b = _eval(bsdf, wi, wr), _eval(bsdf, wr, wi)
+    np.testing.assert_allclose(a, b, rtol=RECIP_RTOL, atol=EVAL_ATOL_OF_PEAK * a.max())
+
+
+def test_base_color_replaces_kd_and_tint_scales_the_lobe(render_module, prior_files, rng):
+    path, model = prior_files["paper-filament"]
+    wi, wr = _pairs(rng, 1000)
+    f = model.evaluate(wi, wr)
+    kd = np.exp([model.prior.parameters()[f"log_kd_{c}"] for c in range(3)])
+    base, tint = np.array([0.6, 0.3, 0.1]), np.array([1.0, 0.5, 2.0])
+    got = _eval(_load(path, base_color="0.6,0.3,0.1", lobe_tint="1,0.5,2"), wi, wr)
+    want = np.maximum(base / np.pi + tint * (f - kd), 0.0)
+    np.testing.assert_allclose(got, want, rtol=EVAL_RTOL, atol=EVAL_ATOL_OF_PEAK * want.max())
+
+
+def test_below_horizon_is_zero_unless_two_sided(render_module, prior_files, rng):
+    path, _ = prior_files["paper-filament"]
+    wi, wr = _pairs(rng, 300)
+    flip = np.array([1.0, 1.0, -1.0])
+    front = _eval(_load(path), wi, wr)
+    assert np.all(_eval(_load(path), wi * flip, wr * flip) == 0)
+    # the back is the front mirrored through the fabric plane (same warp and weft)
+    np.testing.assert_allclose(-_eval(_load(path, two_sided=True), wi * flip, wr * flip), front, rtol=1e-6)
+
+
+def test_scenes_draw_a_fibre_prior_file_with_this_plugin(render_module, prior_files):
+    from kesbrdf.render.bsdf import check_model
+    from kesbrdf.render.scenes import RenderOptions, bsdf_dict, load_scene
+
+    path, _ = prior_files["dense-staple"]
+    assert check_model(path).kind == "fibre-prior"
+    d = bsdf_dict(path, RenderOptions(base_color=(0.5, 0.2, 0.1)))
+    assert d["type"] == "kesbrdf_prior" and "mapping" not in d and d["base_color"] == "0.5,0.2,0.1"
+    # a scene built from the file alone (as `kesbrdf render` and the colourway sheet do)
+    scene = load_scene(path, "sphere", RenderOptions(resolution=(16, 12), spp=1))
+    cloth = [s for s in scene.shapes() if s.id() == "cloth"][0]
+    assert str(cloth.bsdf()).startswith("FibrePriorBSDF[")
+
+
+def test_wrong_kind_is_rejected_in_one_line(render_module, tmp_path):
+    from kesbrdf.errors import ModelError
+    from kesbrdf.gonio import measure
+    from kesbrdf.model import fit
+    from kesbrdf.references.ward import AnisotropicWard
+    from kesbrdf.render.prior_bsdf import check_prior_model
+
+    path = tmp_path / "w.kes.json"
+    fit(measure(AnisotropicWard(0.1, 0.2))).save(path)
+    with pytest.raises(ModelError, match="reads models of kind 'fibre-prior', got 'kes'"):
+        check_prior_model(path)
+
+
+@pytest.mark.parametrize("name,theta", [("paper-filament", 0.3), ("paper-filament", 1.1), ("dense-staple", 0.6)])
+def test_chi2_prior_sampling(render_module, prior_files, name, theta):
+    import mitsuba as mi
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
+
+    d = {"type": "kesbrdf_prior", "filename": str(prior_files[name][0])}
+    wi = mi.ScalarVector3f(math.sin(theta) * math.cos(0.7), math.sin(theta) * math.sin(0.7), math.cos(theta))
+    sample, pdf = BSDFAdapter("kesbrdf_prior", d, wi=wi)
+    test = ChiSquareTest(
+        domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3,
+        sample_count=CHI2_SAMPLES, res=CHI2_RES, ires=CHI2_IRES, seed=2,
+    )
+    assert test.run(), test.messages
+
+
+def test_compare_render_cli_scores_kes_and_prior(render_module, tmp_path):
+    """``kesbrdf compare-render --with-prior``: both models of one measurement, one panel."""
+    import json
+
+    from PIL import Image
+
+    from kesbrdf.cli.main import main
+
+    out = tmp_path / "cmp.png"
+    assert main(["compare-render", "--reference", "satin-ward", "--with-prior", "--spp", "4",
+                 "--resolution", "48x36", "-o", str(out)]) == 0
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert {k: v["kind"] for k, v in meta["models"].items()} == {"kes": "kes", "fibre-prior": "fibre-prior"}
+    assert meta["flip"] == meta["models"]["kes"]["flip"]
+    assert all(0.0 <= v["flip"] <= 1.0 and np.isfinite(v["rel_rmse"]) for v in meta["models"].values())
+    # reference | KES | FLIP | prior+residual | FLIP
+    assert Image.open(out).size[0] == 5 * 48
