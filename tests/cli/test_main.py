@@ -118,3 +118,25 @@ def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys)
     assert result["rmse"] == pytest.approx(expected["rmse"], rel=1e-12)
     # training-set log error of the KES + body fit on corduroy measured 0.128
     assert result["log_rmse"] < 0.18
+
+
+@pytest.mark.parametrize(
+    "argv, expected",
+    [
+        (["fit", "meas.csv"], "the following arguments are required: -o/--output"),
+        (["fit", "meas.csv", "-o", "m.json", "--kind", "bogus"], "invalid choice: 'bogus'"),
+        (["eval", "m.json", "--pairs", "p.csv", "-o", "o.csv", "--bogus"], "unrecognized arguments: --bogus"),
+    ],
+)
+def test_argument_errors_are_one_line(argv, expected, capsys):
+    """A mistyped command line is one stderr line naming the problem and --help, exit 2
+    (argparse would print the whole usage block first)."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert expected in lines[0]
+    assert lines[0].startswith(f"kesbrdf {argv[0]}: error:")
+    assert f"(see 'kesbrdf {argv[0]} --help')" in lines[0]

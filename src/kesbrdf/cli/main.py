@@ -53,8 +53,21 @@ def _load(name: str):
         raise
 
 
+class _Parser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line (the project's error rule).
+
+    argparse prints the whole usage block before its message; a user who mistyped a
+    flag gets instead ``kesbrdf fit: error: <what> (see 'kesbrdf fit --help')`` and exit
+    code 2, like every other user error.  Sub-parsers inherit the class.
+    """
+
+    def error(self, message):  # noqa: D102  (argparse API)
+        text = " ".join(str(message).split())
+        self.exit(EXIT_USER_ERROR, f"{self.prog}: error: {text} (see '{self.prog} --help')\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="kesbrdf",
         description="Anisotropic fabric BRDFs from four-orientation gonio measurements "
         "(extended KES).",
@@ -67,7 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
             continue
         p = sub.add_parser(name, help=module.HELP, description=module.HELP)
         module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+        p.set_defaults(_run=module.run, _parser=p)
     return parser
 
 
@@ -79,7 +92,9 @@ def error(message: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # name the command whose flags were mistyped, not the top-level parser
+        getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
     if not getattr(args, "_run", None):
         parser.print_help()
         return EXIT_USER_ERROR
