@@ -286,7 +286,8 @@ def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
     with np.errstate(invalid="ignore", divide="ignore"):
         D = Bq / (np.sqrt(e(hx) ** 2 + A * A) * tpsi)
     ok = np.abs(D) < 1.0
-    v = np.arctan2(-A, e(hx)) + np.arccos(np.clip(D, -1.0, 1.0))
+    v = np.arctan2(-A, e(hx)) + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
+    v = np.where(v > np.pi, v - 2 * np.pi, v)  # the same point in (−π, π] (irawan2012: v* wrap)
     ok &= np.abs(v) < np.pi / 2
     sv, cv = np.sin(v), np.cos(v)
     nx, ny, nz = sv, su * cv, cu * cv

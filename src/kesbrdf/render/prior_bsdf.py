@@ -218,6 +218,7 @@ class _Prior:
             Bq = hy * cu - hz * su
             D = Bq / (dr.sqrt(hx * hx + A * A) * tpsi)
             v = dr.atan2(-A, hx) + dr.acos(dr.clip(D, -1.0, 1.0))
+            v = dr.select(v > math.pi, v - 2.0 * math.pi, v)  # wrapped as kesbrdf.prior does
             ok = (dr.abs(D) < 1.0) & (dr.abs(v) < 0.5 * math.pi)
             sv, cv = dr.sin(v), dr.cos(v)
             n = (sv, su * cv, cu * cv)
