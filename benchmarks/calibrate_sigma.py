@@ -39,7 +39,7 @@ from bench_prior import references  # noqa: E402
 from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
 from kesbrdf.gonio import measure  # noqa: E402
 from kesbrdf.model import load  # noqa: E402
-from kesbrdf.prior_model import FibrePriorModel, _variance_terms, support_distance  # noqa: E402
+from kesbrdf.prior_model import OFF_SUPPORT_SCALE, FibrePriorModel, _variance_terms, support_distance  # noqa: E402
 from kesbrdf.validation import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions  # noqa: E402
 
 NOISE = 0.02
@@ -111,11 +111,12 @@ def family_coverage(c, rows, old=False) -> dict:
 
 
 def run() -> dict:
-    fams = {}
+    fams, names = {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         for fam, refs in references().items():
             if refs:
                 fams[fam] = [cases(ref, Path(tmp)) for ref in refs.values()]
+                names[fam] = list(refs)
                 print(f"{fam}: {len(refs)} references", file=sys.stderr)
     result = {"noise": NOISE, "seed": SEED, "hemi_step_deg": HEMI_STEP_DEG, "lofo": {}}
     for fam in fams:
@@ -126,6 +127,12 @@ def run() -> dict:
     c_all = best_scale(fams)
     result["scale_all_families"] = c_all
     result["coverage_all"] = {fam: family_coverage(c_all, rows) for fam, rows in fams.items()}
+    # the constant frozen in the code (c_all rounded), per family and per reference
+    result["frozen_scale"] = OFF_SUPPORT_SCALE
+    result["coverage_frozen"] = {fam: family_coverage(OFF_SUPPORT_SCALE, rows) for fam, rows in fams.items()}
+    result["coverage_frozen_references"] = {
+        f"{fam}/{name}": family_coverage(OFF_SUPPORT_SCALE, [ref_cases])
+        for fam, rows in fams.items() for name, ref_cases in zip(names[fam], rows)}
     return result
 
 
