@@ -116,6 +116,7 @@ class FibrePriorModel(ReflectanceModel):
             fields["residual"] = {"mode": "line", "line_sum": float(res.line_sum), "gamma_max": float(res.gamma_max)}
             arrays = {"residual_phi_grid": res.phi_grid, "residual_gamma_grid": res.gamma_grid,
                       "residual_table": res.table}
+        fields["kes_candidate"] = None  # null: no KES table could be fitted (diagnostics say why)
         if self.kes is not None:
             from kesbrdf.io.model_file import model_to_dict
 
@@ -161,7 +162,7 @@ class FibrePriorModel(ReflectanceModel):
         except (KeyError, TypeError, ValueError, MeasurementError) as exc:
             raise ModelError(f"{source or 'model'}: bad fibre-prior payload ({exc})") from None
         diagnostics = dict(shared.get("diagnostics") or {})
-        if kes is None or support is None:
+        if "kes_candidate" not in fields or support is None:
             diagnostics["uncertainty"] = (
                 "file written before the KES candidate and the measured support were stored: sigma = fit + spread "
                 "to the pure prior + theta_d law only (overconfident off the measured slice, docs/prior.md section 5)")
