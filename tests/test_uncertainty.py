@@ -58,17 +58,24 @@ REFERENCES = {
 }
 
 
-def _fit(ref, tmp_path):
-    """Measurement (2 % noise) and the fibre-prior model as read back from its file."""
-    m = measure(ref, noise=0.02, noise_floor=1e-4, rng=3)
-    FibrePriorModel.fit_measurement(m).save(tmp_path / "m.kes.json")
-    return m, load(tmp_path / "m.kes.json")
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """{name: (measurement at 2 % noise, fitted model, its saved file)}, fitted once."""
+    d = tmp_path_factory.mktemp("cal")
+    out = {}
+    for name, ref in REFERENCES.items():
+        m = measure(ref, noise=0.02, noise_floor=1e-4, rng=3)
+        model = FibrePriorModel.fit_measurement(m)
+        model.save(d / f"{name}.kes.json")
+        out[name] = (m, model, d / f"{name}.kes.json")
+    return out
 
 
 @pytest.mark.parametrize("name", list(REFERENCES))
-def test_file_sigma_calibration(name, tmp_path):
+def test_file_sigma_calibration(name, fitted):
     ref = REFERENCES[name]
-    m, model = _fit(ref, tmp_path)
+    m, _, path = fitted[name]
+    model = load(path)
     assert model.kes is not None and model.support is not None
     held = measure(ref, orientations_deg=HELD_OUT_DEG)
     f, s, sl = predict_sigma(model, held.wi, held.wr)
@@ -91,30 +98,27 @@ def test_file_sigma_calibration(name, tmp_path):
     np.testing.assert_allclose(s, f * sl, rtol=1e-12)
 
 
-def test_file_sigma_equals_in_memory_sigma(tmp_path):
+def test_file_sigma_equals_in_memory_sigma(fitted):
     """The file holds everything the σ needs: the loaded model gives the fitted model's σ."""
-    m = measure(Irawan2012("cotton_twill"), noise=0.02, noise_floor=1e-4, rng=3)
-    fitted = FibrePriorModel.fit_measurement(m)
-    fitted.save(tmp_path / "m.kes.json")
+    _, model, path = fitted["irawan_twill"]
     wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
     wr = wr.reshape(-1, 3)
     wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(90.0)), wr.shape)
-    a = predict_sigma(fitted, wi, wr)[2]
-    b = predict_sigma(load(tmp_path / "m.kes.json"), wi, wr)[2]
+    a = predict_sigma(model, wi, wr)[2]
+    b = predict_sigma(load(path), wi, wr)[2]
     # the file stores float64 arrays exactly; only JSON float text of the prior's
     # parameters (repr, exact) and evaluation order could differ
     np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-12)
 
 
-def test_old_payload_without_kes_candidate_reads_and_says_so(tmp_path):
+def test_old_payload_without_kes_candidate_reads_and_says_so(fitted, tmp_path):
     """A file written before the KES candidate and the support were stored still loads; its
     σ lacks those two terms (so it is narrower off the slice) and its diagnostics say so."""
-    m = measure(Sadeghi2013("satin"), noise=0.02, noise_floor=1e-4, rng=3)
-    FibrePriorModel.fit_measurement(m).save(tmp_path / "new.kes.json")
-    doc = json.loads((tmp_path / "new.kes.json").read_text())
+    _, _, path = fitted["sadeghi_satin"]
+    doc = json.loads(path.read_text())
     del doc["kes_candidate"], doc["support"]
     (tmp_path / "old.kes.json").write_text(json.dumps(doc))
-    new, old = load(tmp_path / "new.kes.json"), load(tmp_path / "old.kes.json")
+    new, old = load(path), load(tmp_path / "old.kes.json")
     assert old.kes is None and old.support is None
     assert "KES candidate" in old.diagnostics["uncertainty"]
     assert "uncertainty" not in new.diagnostics
