@@ -13,57 +13,140 @@ from kesbrdf.errors import ModelError
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.gonio import measure
 from kesbrdf.io.measurement_csv import write_measurement
+from kesbrdf.model import load
 from kesbrdf.prior_model import FibrePriorModel
 from kesbrdf.references.irawan2012 import Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
+from kesbrdf.references.ward import AnisotropicWard
 from kesbrdf.uncertainty import coverage, predict_sigma
 from kesbrdf.validation import HELD_OUT_DEG, hemisphere_directions
 
-# Calibration of the σ a model FILE carries (no KES candidate: the file holds none),
-# measured at 2 % noise on the paper protocol (docs/prior.md §5, "σ from the file"):
-#   Irawan cotton twill: held-out orientations 64 % / 80 % within 1σ / 2σ; Fig. 6
-#     hemispheres 13–15 % / 51–61 %  (too narrow at the rim: the two candidates agree
-#     there, so the spread term is small where both are wrong);
-#   Sadeghi satin: held-out 59 % / 72 %; hemispheres 41–42 % / 72–85 %.
-# Bounds: held-out 2σ ≥ 65 % (the lowest measured is 72 %: not badly overconfident on
-# the orientations a user would ask about), hemispheres 2σ ≥ 45 % (lowest 51 %: stated
-# as overconfident in the docs, guarded against getting worse), the training samples
-# ≥ 95 % within 2σ (the residual reproduces them, so only noise separates them), and
-# the band informative: median σ of ln f < 0.5 (a factor 1.65).
-HELD_MIN_2SIGMA = 0.65
-HEMI_MIN_2SIGMA = 0.45
+# Calibration of the σ a model FILE carries: fit (Laplace) ⊕ spread to the pure prior
+# and to the stored KES table ⊕ θ_d law ⊕ off-support term c·d, with the one global
+# c = OFF_SUPPORT_SCALE chosen by leave-one-family-out (docs/prior.md §5).  Measured at
+# 2 % noise, paper protocol, 10° hemisphere grid, truths within 1σ / 2σ:
+#                     held-out ψ    hemisphere φ_i = 90°   φ_i = 45°
+#   Irawan twill      97 / 100 %    93 / 99 %              92 / 100 %
+#   Sadeghi satin     57 / 73 %     52 / 92 %              64 / 88 %
+#   Ward 0.1/0.3      87 / 100 %    69 / 99 %              63 / 100 %
+# Bounds, per reference and case (n = 348–1044 held-out samples, 324 hemisphere
+# directions).  Sampling: the binomial sd of a coverage fraction at n ≈ 300 is
+# ≤ √(0.25/300) ≈ 0.03, but neighbouring directions share their errors (the error is a
+# smooth function of direction), so the effective n is tens, not hundreds: at n_eff ≈ 25
+# the 2-sd interval is ±0.19 around 0.68 and ±0.09 around 0.95.  Model slack: one
+# constant serves every family; fitted without the family tested it gives family means
+# of 0.45–0.97 at 1σ and 0.85–1.0 at 2σ (docs/prior.md §5), and single references
+# spread wider (satin's held-out orientations, 73 % at 2σ, is the worst we measured).
+# Accepted: 1σ in [0.45, 0.98] (not badly overconfident; not every truth inside 1σ, which
+# would mean a uselessly wide band), 2σ ≥ 0.70 (at most 30 % misses where 5 % is ideal;
+# satin's 73 % is the binding case, honest rather than tuned away).
+MIN_1SIGMA, MAX_1SIGMA = 0.45, 0.98
+MIN_2SIGMA = 0.70
 TRAIN_MIN_2SIGMA = 0.95
+# The band stays informative: median σ of ln f below 0.5 (a factor 1.65) on the held-out
+# orientations, where the data pins the model down.
 MAX_MEDIAN_SIGMA_LOG = 0.5
+# Coarse hemisphere: 10° viewer grid (≈ 330 directions) keeps the test fast.
+HEMI_STEP_DEG = 10.0
 # The eval CSV writes repr(float): values round-trip exactly.
 CSV_RTOL = 1e-12
 
+REFERENCES = {
+    "irawan_twill": Irawan2012("cotton_twill"),
+    "sadeghi_satin": Sadeghi2013("satin"),
+    "ward_0.1_0.3": AnisotropicWard(0.1, 0.3, 0.3, 0.05),
+}
 
-def _fit(ref):
-    m = measure(ref, noise=0.02, noise_floor=1e-4, rng=3)
-    return m, FibrePriorModel.fit_measurement(m, kinds=("filament", "filament"))
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """{name: (measurement at 2 % noise, fitted model, its saved file)}, fitted once."""
+    d = tmp_path_factory.mktemp("cal")
+    out = {}
+    for name, ref in REFERENCES.items():
+        m = measure(ref, noise=0.02, noise_floor=1e-4, rng=3)
+        model = FibrePriorModel.fit_measurement(m)
+        model.save(d / f"{name}.kes.json")
+        out[name] = (m, model, d / f"{name}.kes.json")
+    return out
 
 
-@pytest.mark.parametrize("ref", [Irawan2012("cotton_twill"), Sadeghi2013("satin")], ids=["irawan_twill", "sadeghi_satin"])
-def test_file_sigma_calibration(ref):
-    m, model = _fit(ref)
+@pytest.mark.parametrize("name", list(REFERENCES))
+def test_file_sigma_calibration(name, fitted):
+    ref = REFERENCES[name]
+    m, _, path = fitted[name]
+    model = load(path)
+    assert model.kes is not None and model.support is not None
     held = measure(ref, orientations_deg=HELD_OUT_DEG)
     f, s, sl = predict_sigma(model, held.wi, held.wr)
     case = coverage(f, sl, held.values)
-    assert case["within_2sigma"] >= HELD_MIN_2SIGMA, case
-    assert case["within_1sigma"] <= case["within_2sigma"]
+    assert MIN_1SIGMA <= case["within_1sigma"] <= MAX_1SIGMA, case
+    assert case["within_2sigma"] >= MIN_2SIGMA, case
     assert case["median_sigma_log"] < MAX_MEDIAN_SIGMA_LOG, case
-    wr, _, _ = hemisphere_directions(5.0)
+    wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
     wr = wr.reshape(-1, 3)
     for phi_i in (90.0, 45.0):
         wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(phi_i)), wr.shape)
         f, s, sl = predict_sigma(model, wi, wr)
         case = coverage(f, sl, ref(wi, wr))
-        assert case["within_2sigma"] >= HEMI_MIN_2SIGMA, (phi_i, case)
-        assert case["median_sigma_log"] < MAX_MEDIAN_SIGMA_LOG, case
+        assert MIN_1SIGMA <= case["within_1sigma"] <= MAX_1SIGMA, (phi_i, case)
+        assert case["within_2sigma"] >= MIN_2SIGMA, (phi_i, case)
+    # the training samples: the residual reproduces them, only noise separates them
     f, s, sl = predict_sigma(model, m.wi, m.wr)
     assert coverage(f, sl, m.values)["within_2sigma"] >= TRAIN_MIN_2SIGMA
     # σ in 1/sr is f·σ_ln f
     np.testing.assert_allclose(s, f * sl, rtol=1e-12)
+
+
+def test_file_sigma_equals_in_memory_sigma(fitted):
+    """The file holds everything the σ needs: the loaded model gives the fitted model's σ."""
+    _, model, path = fitted["irawan_twill"]
+    wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
+    wr = wr.reshape(-1, 3)
+    wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(90.0)), wr.shape)
+    a = predict_sigma(model, wi, wr)[2]
+    b = predict_sigma(load(path), wi, wr)[2]
+    # the file stores float64 arrays exactly; only JSON float text of the prior's
+    # parameters (repr, exact) and evaluation order could differ
+    np.testing.assert_allclose(b, a, rtol=1e-9, atol=1e-12)
+
+
+def test_old_payload_without_kes_candidate_reads_and_says_so(fitted, tmp_path):
+    """A file written before the KES candidate and the support were stored still loads; its
+    σ lacks those two terms (so it is narrower off the slice) and its diagnostics say so."""
+    _, _, path = fitted["sadeghi_satin"]
+    doc = json.loads(path.read_text())
+    del doc["kes_candidate"], doc["support"]
+    (tmp_path / "old.kes.json").write_text(json.dumps(doc))
+    new, old = load(path), load(tmp_path / "old.kes.json")
+    assert old.kes is None and old.support is None
+    assert "KES candidate" in old.diagnostics["uncertainty"]
+    assert "uncertainty" not in new.diagnostics
+    wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
+    wr = wr.reshape(-1, 3)
+    wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(90.0)), wr.shape)
+    f_new, _, s_new = predict_sigma(new, wi, wr)
+    f_old, _, s_old = predict_sigma(old, wi, wr)
+    np.testing.assert_allclose(f_old, f_new, rtol=1e-12)  # same prediction
+    # without the KES candidate and the off-support term the band is narrower off the
+    # slice (the mean spread over fewer candidates can be larger at single points) and
+    # covers fewer truths (satin, φ_i = 90°: 2σ coverage 0.85 before, 0.92 after)
+    assert np.median(s_old) < np.median(s_new)
+    truth = Sadeghi2013("satin")(wi, wr)
+    assert coverage(f_old, s_old, truth)["within_2sigma"] < coverage(f_new, s_new, truth)["within_2sigma"]
+
+
+def test_support_distance_is_zero_on_the_measured_slice():
+    from kesbrdf.prior_model import support_distance
+
+    support = {"theta_d_deg": [45.0, 45.0], "gamma_max_deg": 60.0}
+    # in-plane pair on the paper's line θ_i + θ_r = 90°: θ_d = 45°, γ = 30° (inside)
+    wi = spherical_to_cartesian(np.radians(30.0), 0.0)[None]
+    wr = spherical_to_cartesian(np.radians(60.0), np.pi)[None]
+    assert support_distance(support, wi, wr)[0] == pytest.approx(0.0, abs=1e-7)
+    # retro-reflection: θ_d = 0, γ = 2θ = 60° (at the γ edge): d = 45° in radians
+    wr = spherical_to_cartesian(np.radians(30.0), 0.0)[None]
+    assert support_distance(support, wi, wr)[0] == pytest.approx(np.radians(45.0), rel=1e-6)
 
 
 def test_coverage_counts_values():

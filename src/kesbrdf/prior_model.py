@@ -37,7 +37,7 @@ from kesbrdf.measurement import Measurement
 from kesbrdf.model import line_weight, lookup
 from kesbrdf.prior import FibrePrior, fit_prior, fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "RELAX_DEG", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
+__all__ = ["FibrePriorModel", "RELAX_DEG", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
@@ -54,9 +54,15 @@ class FibrePriorModel(ReflectanceModel):
     fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
 
     def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
-                 diagnostics=None, input_info=None):
+                 diagnostics=None, input_info=None, kes=None, support=None):
         self.prior = prior
         self.residual = residual  # SimpleNamespace(phi_grid, gamma_grid, table, line_sum, gamma_max) or None
+        #: The KES table (``kes`` or ``kes-halfdiff`` kind) fitted to the same samples:
+        #: the third candidate of the σ model term (docs/prior.md §5), or None.
+        self.kes = kes
+        #: Where the fit saw data: ``{"theta_d_deg": [lo, hi], "gamma_max_deg": g}``
+        #: (:func:`measured_support`), for the off-slice σ term; None in old files.
+        self.support = dict(support) if support is not None else None
         self.channels = tuple(channels)
         self.parameters = dict(parameters or {})
         self.diagnostics = dict(diagnostics or {})
@@ -110,6 +116,15 @@ class FibrePriorModel(ReflectanceModel):
             fields["residual"] = {"mode": "line", "line_sum": float(res.line_sum), "gamma_max": float(res.gamma_max)}
             arrays = {"residual_phi_grid": res.phi_grid, "residual_gamma_grid": res.gamma_grid,
                       "residual_table": res.table}
+        fields["kes_candidate"] = None  # null: no KES table could be fitted (diagnostics say why)
+        if self.kes is not None:
+            from kesbrdf.io.model_file import model_to_dict
+
+            doc = model_to_dict(self.kes)
+            doc["diagnostics"], doc["input"] = {}, {}
+            fields["kes_candidate"] = doc
+        if self.support is not None:
+            fields["support"] = self.support
         return fields, arrays
 
     @classmethod
@@ -132,10 +147,27 @@ class FibrePriorModel(ReflectanceModel):
                 residual = SimpleNamespace(phi_grid=phi, gamma_grid=gamma, table=table,
                                            line_sum=float(fields["residual"]["line_sum"]),
                                            gamma_max=float(fields["residual"]["gamma_max"]))
-        except (KeyError, TypeError, MeasurementError) as exc:
+            kes, support = None, None
+            if fields.get("kes_candidate") is not None:
+                from kesbrdf.io.model_file import model_from_dict
+
+                kes = model_from_dict(fields["kes_candidate"], f"{source or 'model'}: kes_candidate")
+            if fields.get("support") is not None:
+                support = {"theta_d_deg": [float(v) for v in fields["support"]["theta_d_deg"]],
+                           "gamma_max_deg": float(fields["support"]["gamma_max_deg"]),
+                           "psi_deg": [float(v) for v in fields["support"].get("psi_deg", [])]}
+                if len(support["theta_d_deg"]) != 2 or not all(map(math.isfinite, support["theta_d_deg"]
+                                                                    + [support["gamma_max_deg"]] + support["psi_deg"])):
+                    raise ModelError(f"{source or 'model'}: support: expected finite theta_d_deg [lo, hi] and gamma_max_deg")
+        except (KeyError, TypeError, ValueError, MeasurementError) as exc:
             raise ModelError(f"{source or 'model'}: bad fibre-prior payload ({exc})") from None
+        diagnostics = dict(shared.get("diagnostics") or {})
+        if "kes_candidate" not in fields or support is None:
+            diagnostics["uncertainty"] = (
+                "file written before the KES candidate and the measured support were stored: sigma = fit + spread "
+                "to the pure prior + theta_d law only (overconfident off the measured slice, docs/prior.md section 5)")
         return cls(prior, residual, channels=shared.get("channels", ("value",)), parameters=shared.get("parameters"),
-                   diagnostics=shared.get("diagnostics"), input_info=shared.get("input_info"))
+                   diagnostics=diagnostics, input_info=shared.get("input_info"), kes=kes, support=support)
 
     # -- fitting ------------------------------------------------------------------
     @classmethod
@@ -161,11 +193,74 @@ class FibrePriorModel(ReflectanceModel):
                 if residual_opt is True:
                     raise
                 note = f"no residual: {exc}"
-        return cls(prior, residual, channels=m.channels,
+        kes, kes_note = _fit_kes_candidate(m.subset(rows))
+        return cls(prior, residual, channels=m.channels, kes=kes, support=measured_support(m.subset(rows)),
                    parameters={"residual": residual is not None, "prior": prior.report.get("chosen"),
                                "theta_d_law": f"Fresnel eta={1.5} normalised at 45 deg"
                                + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else "")},
-                   diagnostics={"fit": prior.report, "residual": note}, input_info=m.input_info())
+                   diagnostics={"fit": prior.report, "residual": note, "kes_candidate": kes_note},
+                   input_info=m.input_info())
+
+
+def _fit_kes_candidate(m: Measurement):
+    """(KES model of the same samples, note): ``kes`` for one incidence line, ``kes-halfdiff``
+    for several, None (and why) when neither can fit them.  It is the third candidate of
+    the σ model term (:func:`predict_with_uncertainty`)."""
+    from kesbrdf.errors import KesbrdfError
+    from kesbrdf.kinds import kind_class
+
+    rm = m.subset(m.is_in_plane) if np.any(m.is_in_plane) else m
+    name = "kes-halfdiff" if _incidence_lines(rm) > 1 else "kes"
+    try:
+        return kind_class(name).fit_measurement(m), f"{name} table of the same samples (sigma candidate)"
+    except KesbrdfError as exc:
+        return None, f"no KES candidate for sigma: {exc}"
+
+
+def _theta_d(wi, wr):
+    """θ_d, half the angle between ω_i and ω_r (radians)."""
+    c = np.clip(np.sum(wi * wr, axis=-1), -1.0, 1.0)
+    return 0.5 * np.arccos(c)
+
+
+def measured_support(m: Measurement) -> dict:
+    """Where ``m`` holds data: its θ_d range, largest deviation γ and light azimuths ψ
+    (the orientations, mod 180°), all in degrees."""
+    td = np.degrees(_theta_d(m.wi, m.wr))
+    _, gamma = to_phi_gamma(m.wi, m.wr, "deviation")
+    psi = np.unique(np.round(np.degrees(np.arctan2(m.wi[:, 1], m.wi[:, 0])) % 180.0, 6))
+    return {"theta_d_deg": [float(np.min(td)), float(np.max(td))], "gamma_max_deg": float(np.degrees(np.max(gamma))),
+            "psi_deg": [float(v) for v in psi]}
+
+
+def support_distance(support: dict, wi, wr) -> np.ndarray:
+    r"""Distance (radians) of direction pairs from the measured support, eq. (U2):
+
+    .. math::
+
+        d^2 = \operatorname{dist}(\theta_d, [\theta_d^-, \theta_d^+])^2
+            + \max(0, \gamma - \gamma_\max)^2
+            + \bigl(\sin\theta_i \min_k |\phi_i - \psi_k|_{180°}\bigr)^2
+
+    θ_d outside the measured θ_d range, γ beyond the largest measured deviation, and the
+    light's azimuth from the nearest measured orientation ψ_k (mod 180°, as arc length:
+    the azimuth does not matter at normal incidence).  A support without ``psi_deg``
+    (written before it was stored) has no azimuth term.
+    """
+    wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+    lo, hi = np.radians(support["theta_d_deg"])
+    td = _theta_d(wi, wr)
+    _, gamma = to_phi_gamma(wi, wr, "deviation")
+    d_td = np.maximum(lo - td, 0.0) + np.maximum(td - hi, 0.0)
+    d_g = np.maximum(gamma - math.radians(support["gamma_max_deg"]), 0.0)
+    d2 = d_td**2 + d_g**2
+    psi = np.radians(np.asarray(support.get("psi_deg", []), float))
+    if psi.size:
+        phi_i = np.arctan2(wi[..., 1], wi[..., 0])
+        gap = np.abs((phi_i[..., None] - psi + np.pi / 2) % np.pi - np.pi / 2).min(axis=-1)
+        sin_ti = np.sqrt(np.clip(1.0 - wi[..., 2] ** 2, 0.0, 1.0))
+        d2 = d2 + (sin_ti * gap) ** 2
+    return np.sqrt(d2)
 
 
 def ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
@@ -221,23 +316,42 @@ def _fit_residual(prior: FibrePrior, m: Measurement):
 MAX_SIGMA_LOG = 3.0
 
 
-def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=()):
-    r"""Prediction and a per-prediction σ: fit noise (Laplace) ⊕ spread between candidates.
+#: Scale c of the off-support term σ_off = c·d (eq. U2, σ of ln f per radian of distance
+#: from the measured data).  Provenance: leave-one-family-out over the five reference
+#: families of :mod:`kesbrdf.references` (Irawan–Marschner and Sadeghi presets, Ward,
+#: Ashikhmin–Shirley, the RGL felt; benchmarks/calibrate_sigma.py), 2 % noise, paper
+#: protocol, held-out orientations and both Fig. 6 hemispheres.  The constants fitted
+#: without each family were 0.47–1.19 (docs/prior.md §5 gives the coverage they give on
+#: the family left out); 0.60 is the one fitted on all families at once (2026-12-02).
+OFF_SUPPORT_SCALE = 0.60
+
+
+def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_support_scale=None):
+    r"""Prediction and a per-prediction σ: fit noise (Laplace) ⊕ model term ⊕ off-support term.
 
     .. math::
 
-        \sigma_{\ln f}^2 = g^\top \Sigma_\theta\, g \;+\; \frac{1}{K}\sum_k (\ln f_k - \ln f)^2
+        \sigma_{\ln f}^2 = g^\top \Sigma_\theta\, g
+            \;+\; \frac{1}{K}\sum_k (\ln f_k - \ln f)^2
+            \;+\; (w_s \ln\Phi(\theta_d))^2 \;+\; (c\, d)^2        \qquad (U1)
 
-    The first term is the fit: g = ∂ ln f_prior/∂θ (batched forward difference) and
-    Σ_θ the Laplace covariance of the prior's fit (:func:`kesbrdf.prior._laplace_covariance`).
-    The second is the model term: the RMS log difference between the prediction f
-    (prior + residual, or the pure prior) and the other candidates f_k, namely the pure
-    prior (when the model has a residual) and every callable in ``others`` (e.g. the
-    ``kes`` model of the same data).  When the data holds one θ_d slice (the paper
-    protocol), a third term adds the spread between the default θ_d law and none,
-    (w_s ln Φ(θ_d))², w_s = (f_prior − k_d)/f_prior the specular fraction: zero on the
-    measured slice θ_d = 45°, growing away from it.  Logs use ε = 10⁻⁴·max f so dark
-    regions do not dominate.
+    * fit: g = ∂ ln f_prior/∂θ (:meth:`FibrePrior.log_jacobian`) and Σ_θ the Laplace
+      covariance of the prior's fit;
+    * model spread: the mean squared log difference between the prediction f (prior +
+      residual, or the pure prior) and the other candidates f_k: the pure prior (when
+      the model has a residual), the KES table fitted to the same samples (stored in
+      the file, :attr:`FibrePriorModel.kes`) and every callable in ``others``;
+    * θ_d law (one θ_d slice, the paper protocol): the spread between the default
+      Fresnel law and none, w_s = (f_prior − k_d)/f_prior the specular fraction; zero
+      on the measured slice θ_d = 45°;
+    * off support: d the distance from the measured data (:func:`support_distance`,
+      eq. U2: θ_d outside the measured θ_d range, γ beyond the largest measured
+      deviation), c = ``off_support_scale`` (default :data:`OFF_SUPPORT_SCALE`, one
+      global constant chosen by leave-one-family-out, docs/prior.md §5).
+
+    Logs use ε = 10⁻⁴·max f so dark regions do not dominate.  A model read from a file
+    written before the KES candidate and the support were stored lacks those two terms
+    (its diagnostics say so).
 
     Returns
     -------
@@ -252,6 +366,16 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=()):
     wr = np.asarray(wr, float).reshape(-1, 3)
     wi, wr = np.broadcast_arrays(wi, wr)
     f = model.evaluate(wi, wr)
+    var = _variance_terms(model, wi, wr, f, others)
+    if model.support is not None:
+        c = OFF_SUPPORT_SCALE if off_support_scale is None else off_support_scale
+        var = var + (c * support_distance(model.support, wi, wr))[:, None] ** 2
+    sigma_log = np.minimum(np.sqrt(np.maximum(var, 0)), MAX_SIGMA_LOG)
+    return f, f * sigma_log, sigma_log
+
+
+def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
+    """Fit + spread + θ_d-law terms of eq. (U1), shape (N, C)."""
     eps = max(float(np.nanmax(f)), 1e-300) * 1e-4
     var = np.zeros_like(f)
     prior = model.prior
@@ -262,6 +386,8 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=()):
     cands = list(others)
     if model.residual is not None:
         cands.append(prior)
+    if model.kes is not None:
+        cands.append(model.kes.evaluate)
     if cands:
         lf = np.log(f + eps)
         spread = [(np.log(np.maximum(np.asarray(c(wi, wr), float), 0) + eps) - lf) ** 2 for c in cands]
@@ -276,8 +402,7 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=()):
         kd = np.exp([prior.parameters()[f"log_kd_{c}"] for c in range(prior.spec.n_channels)])
         spec_frac = np.clip((fp - kd) / np.maximum(fp, 1e-300), 0.0, 1.0)
         var = var + (spec_frac * log_phi[:, None]) ** 2
-    sigma_log = np.minimum(np.sqrt(np.maximum(var, 0)), MAX_SIGMA_LOG)
-    return f, f * sigma_log, sigma_log
+    return var
 
 
 def calibration(model: FibrePriorModel, reference, wi, wr, others=()) -> dict:

@@ -1,8 +1,10 @@
 """Per-prediction uncertainty of a model file, and its coverage of held-out truths.
 
-Only the ``fibre-prior`` kind carries a σ: its fit has a Laplace covariance and it has
-candidate models (the pure prior, prior + residual) whose spread is the model term
-(:func:`kesbrdf.prior_model.predict_with_uncertainty`, docs/prior.md §5).  A ``kes`` /
+Only the ``fibre-prior`` kind carries a σ: its fit has a Laplace covariance, its file
+holds the candidate models whose spread is the model term (the pure prior and the KES
+table fitted to the same samples) and the support of the measured data, from which an
+off-support term grows (:func:`kesbrdf.prior_model.predict_with_uncertainty`,
+docs/prior.md §5).  A ``kes`` /
 ``kes-halfdiff`` table interpolates the measured samples exactly; the file holds no
 noise estimate and no second candidate, so any σ computed from it alone would be
 invented.  Asking for one is a :class:`~kesbrdf.errors.ModelError` that says so
@@ -29,10 +31,16 @@ def has_uncertainty(model) -> bool:
 def predict_sigma(model, wi, wr, source: str = "model"):
     r"""f_r and its σ at direction pairs.
 
-    σ of ln f combines the fit noise propagated through the Laplace covariance and the
-    spread between the candidates (the model and its pure prior), docs/prior.md §5:
+    σ of ln f combines the fit noise propagated through the Laplace covariance, the
+    spread between the candidates (the model, its pure prior and the stored KES table),
+    the θ_d-law term and the off-support term, eq. (U1) of
+    :func:`kesbrdf.prior_model.predict_with_uncertainty` (docs/prior.md §5):
 
     .. math:: \sigma_{\ln f}^2 = g^\top\Sigma_\theta g + \tfrac1K\sum_k(\ln f_k-\ln f)^2
+              + (w_s\ln\Phi)^2 + (c\,d)^2
+
+    A file written before the KES candidate and the support were stored gives the first
+    three terms with the pure prior as the only candidate (its diagnostics say so).
 
     Parameters
     ----------

@@ -21,7 +21,7 @@ def add_arguments(p):
                    help="direction mapping (default: the model kind's own, deviation for kes); "
                    "one the model's kind lacks is an error")
     p.add_argument("--uncertainty", action="store_true",
-                   help="add a sigma column per channel (1/sr; fibre-prior models only: fit noise + candidate spread)")
+                   help="add a sigma column per channel (1/sr; fibre-prior models only: fit noise + spread to the pure prior and KES + distance from the data)")
 
 
 def run(args) -> int:

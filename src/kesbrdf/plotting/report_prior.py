@@ -32,8 +32,9 @@ def figure_uncertainty(model, reference=None, lights_deg=LIGHTS_DEG, n: int = 81
 
     Works for any model that carries a σ (:mod:`kesbrdf.uncertainty`; the paper's
     Fig. 6 builder draws only the KES kinds).  σ is
-    :func:`kesbrdf.uncertainty.predict_sigma` (fit noise ⊕ candidate spread,
-    docs/prior.md §5).  Equal-area disks, x = warp, y = weft; pixels outside are blank.
+    :func:`kesbrdf.uncertainty.predict_sigma` (fit noise ⊕ spread to the pure prior and the
+    stored KES table ⊕ θ_d law ⊕ distance from the measured data, docs/prior.md §5).
+    Equal-area disks, x = warp, y = weft; pixels outside are blank.
     """
     from kesbrdf.geometry import spherical_to_cartesian
     from kesbrdf.plotting._mpl import new_figure
