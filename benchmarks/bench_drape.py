@@ -74,7 +74,7 @@ def _hash_grid_identity() -> float:
             drape.HASH_GRID_DIM = dim
             with tempfile.TemporaryDirectory() as tmp:
                 drape.simulate_drape("sphere", Path(tmp), 10, resolution=24)
-                out.append(drape.read_frame_positions(tmp, 9))
+                out.append(drape.load_checkpoint(tmp)["q"])
     finally:
         drape.HASH_GRID_DIM = saved
     return float(np.abs(out[0] - out[1]).max())
@@ -83,7 +83,7 @@ def _hash_grid_identity() -> float:
 def _garment() -> dict:
     import numpy as np
 
-    from kesbrdf.cloth.drape import DrapeParameters, build_scene, read_frame_positions, simulate_drape
+    from kesbrdf.cloth.drape import DrapeParameters, build_scene, load_checkpoint, simulate_drape
 
     kw = dict(resolution=40, turn_deg=90.0, turn_start_s=0.6, turn_duration_s=1.2)
     stamps: list[float] = []
@@ -95,7 +95,7 @@ def _garment() -> dict:
 
     with tempfile.TemporaryDirectory() as tmp:
         simulate_drape("garment", Path(tmp), 40, progress=stamp, **kw)
-        q = read_frame_positions(tmp, 39)
+        q = load_checkpoint(tmp)["q"]
     seams = build_scene(DrapeParameters(scene="garment", **kw)).cloth.seams
     return {"garment_40_s_per_frame": (stamps[-1] - stamps[0]) / (len(stamps) - 1),
             "garment_40_cpu_s_per_frame": (cpu[-1] - cpu[0]) / (len(cpu) - 1),

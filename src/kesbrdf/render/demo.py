@@ -27,9 +27,12 @@ DEMO_COLOUR = None
 STILL_SPP = 8
 #: The clip: rendered at CLIP_RENDER_SIZE with CLIP_SPP and OIDN, written at 1280×720
 #: (Lanczos); native 720p at full quality is ``kesbrdf render --animation ...
-#: --resolution 1280x720 --spp 64 --denoise`` (docs/rendering.md).  On the shared 2-core
-#: machine a native 720p frame costs 4-8 s of CPU, which 49 frames cannot afford
-#: inside the demo's 3 minutes.
+#: --resolution 1280x720 --spp 64 --denoise`` (docs/rendering.md).  Measured in one run
+#: on the shared 2-core machine: a 640×360 frame at 4 spp + OIDN, upscaled, costs 1.6 s
+#: of CPU; a native 1280×720 frame at the least possible 1 spp costs 2.8–3.0 s (path
+#: tracing 1.2–1.4 s, OIDN at four times the pixels 1.5 s; OIDN's "fast" mode halves
+#: that but leaves speckles along the silhouettes).  For 49 frames that is 60–70 s more,
+#: which takes the demo (160 s) past its 3 minutes, so the demo upscales.
 CLIP_SPP = 4
 CLIP_RENDER_SIZE = (640, 360)
 #: First drape frame of the clip (the skirt has settled; the turn starts at 0.6 s).
@@ -89,7 +92,8 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
         clip = _studio(clip_spp, resolution=CLIP_RENDER_SIZE, max_depth=3)
         first = min(clip_first_frame, len(garment.frames) - 1)
         say(f"render: clip of {len(garment.frames) - first} frames ({CLIP_RENDER_SIZE[0]}x{CLIP_RENDER_SIZE[1]}, "
-            f"{clip_spp} spp + OIDN, written at 1280x720)")
+            f"{clip_spp} spp + OIDN, upscaled to 1280x720: native 720p is ~1.8x the CPU a frame, "
+            "past the demo's 3 min; docs/rendering.md)")
         written["animation"] = _animation.render_animation(
             model_path, garment.root, out / "garment.mp4", clip, progress=frames, first_frame=first,
             gif=out / "garment.gif", gif_width=640, upscale_to=(1280, 720))
