@@ -67,14 +67,24 @@ class FitReport:
     comparison: dict | None = None
 
     def comparison_summary(self) -> str:
-        """One line: held-out NRMSE per candidate and the one kept ("" when not compared)."""
+        """One line: the candidates' held-out errors, what was kept and why ("" when not compared)."""
         c = self.comparison
         if not c:
             return ""
         med = c.get("median_biases") or {}
         parts = ", ".join(f"{k} {v:.3f}" for k, v in sorted(med.items(), key=lambda kv: kv[1]))
-        what = (f"{c['folds']}-fold log RMSE" if "folds" in c else "leave-one-orientation-out NRMSE on the biases")
-        return f"{what}: {parts}; kept {c.get('kept')}"
+        if "folds" in c:
+            return f"{c['folds']}-fold log RMSE: {parts}; kept {c.get('kept')}"
+        text = f"leave-one-orientation-out NRMSE on the biases: {parts}"
+        mirror = c.get("mirror") or {}
+        if mirror.get("z") is not None:
+            alike = "mirror images" if mirror.get("symmetric") else "not mirror images"
+            text += f"; biases {alike} (z {mirror['z']:.2f}, limit {mirror.get('limit', float('nan')):g})"
+        four = c.get("median_all") or {}
+        if mirror.get("symmetric") and four:
+            text += "; all four orientations: " + ", ".join(f"{k} {v:.3f}" for k, v in four.items())
+        why = f" ({c['why']})" if c.get("why") else ""
+        return f"{text}; kept {c.get('kept')}{why}"
 
     def summary(self) -> str:
         """One line for a terminal: kind, why, rows."""
@@ -200,7 +210,7 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             name = "fibre-prior"
             mask, why_not = fitter_class(name).usable_rows(m)
             options = dict(PRIOR_CANDIDATES[comparison["kept"]])
-            why = f"{comparison['kept']} beat kes in leave-one-orientation-out validation on this data"
+            why = f"{comparison['kept']} kept by leave-one-orientation-out validation on this data ({comparison['why']})"
     cls = fitter_class(name)
     _check_options(name, cls, options, strict)
     if strict:
@@ -246,7 +256,7 @@ def _kfold_with_prior(m) -> dict | None:
 
 def _compare_with_prior(m) -> dict | None:
     """:func:`kesbrdf.selection.loo_compare` when the prior can use every row, with the
-    candidate kept (``"kes"`` unless a prior candidate has the lower median NRMSE)."""
+    candidate kept and why (:func:`kesbrdf.selection.choose`)."""
     try:
         prior_cls = fitter_class("fibre-prior")
     except (ImportError, KesbrdfError):  # the prior needs scipy (extra "fit")
@@ -260,12 +270,9 @@ def _compare_with_prior(m) -> dict | None:
         result = loo_compare(m)
     except KesbrdfError:  # too few orientations to hold one out: nothing to compare
         return None
-    med = result.get("median_biases") or {}
-    kept = "kes"
-    if "kes" in med:
-        best = min(med, key=med.get)
-        kept = best if med[best] < med["kes"] else "kes"
-    result["kept"] = kept
+    from kesbrdf.selection import choose
+
+    result["kept"], result["why"] = choose(result)
     return result
 
 
