@@ -44,7 +44,7 @@ from kesbrdf.gonio import measure  # noqa: E402
 from kesbrdf.model import fit as kes_fit  # noqa: E402
 from kesbrdf.prior import fit_prior  # noqa: E402
 from kesbrdf.prior_model import FibrePriorModel, ratio_measurement, ratio_table  # noqa: E402
-from kesbrdf.selection import INTERPOLATION, choose, loo_compare  # noqa: E402
+from kesbrdf.selection import choose, loo_compare  # noqa: E402
 from kesbrdf.validation import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics  # noqa: E402
 
 #: Multiplicative noise of the simulated measurements (σ = 2 % of the value).
@@ -95,7 +95,7 @@ def evidence(m) -> dict:
     """Everything a rule may look at: computed from the measurement alone."""
     loo = loo_compare(m)
     return {"loo": loo["orientations"], "median_biases": loo["median_biases"],
-            "median_all": loo["median_all"], "mirror": loo["mirror"]}
+            "interpolation": loo["interpolation"], "median_all": loo["median_all"], "mirror": loo["mirror"]}
 
 
 # -- rules: evidence -> candidate --------------------------------------------------------
@@ -111,7 +111,7 @@ def _as_result(ev, z_limit=None):
     mirror = dict(ev["mirror"])
     if z_limit is not None and mirror.get("z") is not None:
         mirror["symmetric"] = mirror["z"] <= z_limit
-    return {"orientations": ev["loo"], "median_biases": ev["median_biases"],
+    return {"orientations": ev["loo"], "median_biases": ev["median_biases"], "interpolation": ev["interpolation"],
             "median_all": ev["median_all"], "mirror": mirror}
 
 
@@ -129,7 +129,7 @@ def rule_adequacy_always(ev, z_limit=None):
 
 def rule_adequacy_0_90(ev, z_limit=None):
     """Prior's LOO at warp and weft against interpolation over ψ there, on every fabric."""
-    if _med(ev, "prior", ("0", "90")) < float(np.median([ev["loo"][p][INTERPOLATION] for p in ("0", "90")])):
+    if _med(ev, "prior", ("0", "90")) < float(np.median([ev["interpolation"][p] for p in ("0", "90")])):
         return "prior+residual"
     return "kes"
 

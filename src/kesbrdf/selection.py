@@ -36,9 +36,10 @@ def loo_compare(measurement, **fit_options) -> dict:
     dict
         ``{"orientations": {psi_deg: {candidate: nrmse}}, "median_biases": {candidate:
         median over the biases}, "best": candidate with the lowest median on the biases,
-        "median_all": {"prior", INTERPOLATION: median over all four orientations},
-        "mirror": mirror_test(measurement)}``; the rows also hold :data:`INTERPOLATION`,
-        the KES-free baseline.  :func:`choose` turns it into a decision.
+        "interpolation": {psi_deg: nrmse} of the KES-free baseline
+        (:func:`orientation_interpolation_loo`), "median_all": {"prior", INTERPOLATION:
+        median over all four orientations}, "mirror": mirror_test(measurement)}``.
+        :func:`choose` turns it into a decision.
     """
     m = measurement
     psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
@@ -81,16 +82,12 @@ def loo_compare(measurement, **fit_options) -> dict:
                    for c in cands if any(k in table and c in table[k] for k in ("45", "135"))}
     best = min(bias_median, key=bias_median.get) if bias_median else None
     interp = orientation_interpolation_loo(m)
-    for k, v in interp.items():
-        if k in table:
-            table[k][INTERPOLATION] = v
     four = {}
-    for c in ("prior", INTERPOLATION):
-        vals = [r[c] for r in table.values() if c in r and np.isfinite(r[c])]
-        if len(vals) == 4:
+    for c, vals in (("prior", [r.get("prior", np.nan) for r in table.values()]), (INTERPOLATION, list(interp.values()))):
+        if len(vals) == 4 and np.all(np.isfinite(vals)):
             four[c] = float(np.median(vals))
     return {"orientations": table, "median": median, "median_biases": bias_median, "best": best,
-            "median_all": four, "mirror": mirror_test(m)}
+            "interpolation": interp, "median_all": four, "mirror": mirror_test(m)}
 
 
 #: Name of the KES-free baseline (:func:`orientation_interpolation_loo`) in the tables.
@@ -121,10 +118,10 @@ def choose(result: dict) -> tuple[str, str]:
         best = min(med, key=med.get)
         kept = best if med[best] < med["kes"] else "kes"
         return kept, "lowest error on the held-out biases"
-    ibias = float(np.median([result["orientations"][k][INTERPOLATION] for k in ("45", "135")
-                             if INTERPOLATION in result["orientations"].get(k, {})]))
+    interp = result.get("interpolation") or {}
+    ibias = float(np.median([interp[k] for k in ("45", "135") if k in interp] or [np.nan]))
     prior_ok = four["prior"] < four[INTERPOLATION]
-    resid_ok = med.get("prior+residual", np.inf) < ibias
+    resid_ok = bool(med.get("prior+residual", np.inf) < ibias)
     if prior_ok and resid_ok:
         return "prior+residual", ("biases are mirror images, so their errors cannot decide; the prior beats "
                                   "interpolation over psi on all four orientations, prior+residual on the biases")
