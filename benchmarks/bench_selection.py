@@ -123,7 +123,8 @@ def rule_bias_loo(ev, z_limit=None):
 
 
 def rule_adequacy_always(ev, z_limit=None):
-    """:func:`kesbrdf.selection.choose`'s adequacy test on every fabric (no mirror test)."""
+    """:func:`kesbrdf.selection.choose` with every fabric taken as mirror-symmetric: the
+    interpolation baseline only, kes's bias error never a comparison."""
     return choose(_as_result(ev, z_limit=np.inf))[0]
 
 
@@ -142,8 +143,8 @@ def rule_choose(ev, z_limit=None):
 RULES = {
     "bias_loo (before)": (rule_bias_loo, False),
     "adequacy_0_90, every fabric": (rule_adequacy_0_90, False),
-    "adequacy_all4, every fabric": (rule_adequacy_always, False),
-    "choose (mirror z <= 2, then adequacy)": (rule_choose, False),
+    "choose without kes's bias error": (rule_adequacy_always, False),
+    "choose (adopted; mirror z <= 2)": (rule_choose, False),
     "choose, z limit leave-one-family-out": (rule_choose, True),
 }
 #: Limits on the mirror test's z tried leave-one-family-out.

@@ -138,7 +138,7 @@ def test_auto_compares_with_the_prior_on_held_out_orientations():
     assert c["median_all"]["prior"] > c["median_all"]["interp(psi)"]
     assert c["kept"] == "kes" and model.kind == "kes"
     line = report.comparison_summary()
-    assert "biases mirror images" in line and "kept kes (" in line and "does not beat interpolation" in line
+    assert "biases mirror images" in line and "kept kes (" in line and "the prior does not beat interpolation" in line
     # the comparison is skipped when asked, or when options name one kind
     assert kesbrdf.fit(m, compare=False)[1].comparison is None
     assert kesbrdf.fit(m, orientations=3)[1].comparison is None

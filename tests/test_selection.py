@@ -59,16 +59,20 @@ def _result(symmetric, prior_all, interp_all, bias):
             "interpolation": {"0": interp_all, "45": interp_all, "90": interp_all, "135": interp_all}}
 
 
-def test_choose_uses_the_biases_unless_they_are_mirror_images():
+def test_choose_needs_the_prior_to_beat_every_scored_comparison():
     bias = {"kes": 0.04, "prior": 0.3, "prior+residual": 0.05}
-    # not mirror images: the bias errors decide (kes lowest)
-    assert choose(_result(False, 0.1, 0.5, bias))[0] == "kes"
-    assert choose(_result(False, 0.1, 0.5, {**bias, "prior+residual": 0.03}))[0] == "prior+residual"
-    # mirror images: the prior must beat interpolation on all four and prior+residual on the biases
+    # mirror images: kes's bias error (lowest here) is not a comparison
     kept, why = choose(_result(True, 0.1, 0.5, bias))
     assert kept == "prior+residual" and "mirror images" in why
-    assert choose(_result(True, 0.6, 0.5, bias))[0] == "kes"
-    assert choose(_result(True, 0.1, 0.04, bias))[0] == "kes"  # prior+residual 0.05 on the biases
+    # not mirror images: prior+residual must also beat kes on the biases
+    kept, why = choose(_result(False, 0.1, 0.5, bias))
+    assert kept == "kes" and "does not beat kes" in why
+    assert choose(_result(False, 0.1, 0.5, {**bias, "prior+residual": 0.03}))[0] == "prior+residual"
+    # the prior must beat interpolation over psi on all four orientations ...
+    kept, why = choose(_result(True, 0.6, 0.5, bias))
+    assert kept == "kes" and "all four orientations" in why
+    # ... and prior+residual must beat it on the biases (0.05 vs 0.04)
+    assert choose(_result(True, 0.1, 0.04, bias))[0] == "kes"
 
 
 def test_auto_keeps_prior_residual_on_a_symmetric_irawan_preset_and_says_why():
@@ -88,4 +92,4 @@ def test_auto_keeps_prior_residual_on_a_symmetric_irawan_preset_and_says_why():
     for name, value in c["median_all"].items():
         assert f"{name} {value:.3f}" in line
     assert "biases mirror images" in line and f"z {c['mirror']['z']:.2f}" in line
-    assert "kept prior+residual (" in line and "interpolation over psi" in line
+    assert "kept prior+residual (" in line and "beat interpolation over psi" in line
