@@ -230,7 +230,5 @@ def markdown(result: dict) -> str:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    import json
-
     res = run()
     print(res["markdown"])

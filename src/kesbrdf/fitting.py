@@ -53,7 +53,10 @@ class FitReport:
     comparison : dict or None
         ``kind="auto"`` on in-plane data: the leave-one-orientation-out comparison of the
         row-based choice with the woven-cloth prior (:func:`kesbrdf.selection.loo_compare`):
-        median NRMSE on the held-out biases per candidate, and which was kept.
+        median NRMSE per candidate on the held-out biases and (prior, interpolation over
+        ψ) on all four orientations, the mirror test of the biases, the candidate kept
+        and why (:func:`kesbrdf.selection.choose`); :meth:`comparison_summary` is the
+        one-line form.
     """
 
     kind: str
@@ -172,8 +175,9 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
     compare : bool
         ``kind="auto"`` only: when the row-based choice is ``kes`` and the woven-cloth
         prior (``fibre-prior``) can use every row too, compare them by
-        leave-one-orientation-out validation on this measurement and keep the better
-        (``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
+        leave-one-orientation-out validation on this measurement and keep prior +
+        residual only where it beats every comparison the data allow
+        (:func:`kesbrdf.selection.choose`; ``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
         skips it, and so does any fit option (options belong to one kind).
     **options
         Passed to the fitter; an option it does not accept is an error.
