@@ -125,17 +125,20 @@ def test_a_new_fitter_joins_auto_selection(monkeypatch):
 
 
 def test_auto_compares_with_the_prior_on_held_out_orientations():
-    """Paper protocol: kes and the fibre prior are compared leave-one-orientation-out,
-    and the kept candidate is the one with the lowest held-out median NRMSE."""
+    """Paper protocol: kes and the fibre prior are compared leave-one-orientation-out
+    (kesbrdf.selection.choose).  Ward is symmetric in y, so the bias errors cannot
+    decide; the pure prior does not beat interpolation over ψ on all four orientations
+    (a microfacet lobe is outside its family), and kes is kept, as the oracle of
+    benchmarks/bench_selection.py says for both Ward references."""
     m = measure(WARD)
     model, report = kesbrdf.fit(m)
     c = report.comparison
     assert c is not None and {"kes", "prior", "prior+residual"} <= set(c["median_biases"])
-    med = c["median_biases"]
-    best = min(med, key=med.get)
-    assert c["kept"] == (best if med[best] < med["kes"] else "kes")
-    assert model.kind == ("kes" if c["kept"] == "kes" else "fibre-prior")
-    assert "kept" in report.comparison_summary()
+    assert c["mirror"]["symmetric"]
+    assert c["median_all"]["prior"] > c["median_all"]["interp(psi)"]
+    assert c["kept"] == "kes" and model.kind == "kes"
+    line = report.comparison_summary()
+    assert "biases mirror images" in line and "kept kes (" in line and "the prior does not beat interpolation" in line
     # the comparison is skipped when asked, or when options name one kind
     assert kesbrdf.fit(m, compare=False)[1].comparison is None
     assert kesbrdf.fit(m, orientations=3)[1].comparison is None

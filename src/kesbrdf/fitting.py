@@ -53,7 +53,10 @@ class FitReport:
     comparison : dict or None
         ``kind="auto"`` on in-plane data: the leave-one-orientation-out comparison of the
         row-based choice with the woven-cloth prior (:func:`kesbrdf.selection.loo_compare`):
-        median NRMSE on the held-out biases per candidate, and which was kept.
+        median NRMSE per candidate on the held-out biases and (prior, interpolation over
+        ψ) on all four orientations, the mirror test of the biases, the candidate kept
+        and why (:func:`kesbrdf.selection.choose`); :meth:`comparison_summary` is the
+        one-line form.
     """
 
     kind: str
@@ -67,14 +70,24 @@ class FitReport:
     comparison: dict | None = None
 
     def comparison_summary(self) -> str:
-        """One line: held-out NRMSE per candidate and the one kept ("" when not compared)."""
+        """One line: the candidates' held-out errors, what was kept and why ("" when not compared)."""
         c = self.comparison
         if not c:
             return ""
         med = c.get("median_biases") or {}
         parts = ", ".join(f"{k} {v:.3f}" for k, v in sorted(med.items(), key=lambda kv: kv[1]))
-        what = (f"{c['folds']}-fold log RMSE" if "folds" in c else "leave-one-orientation-out NRMSE on the biases")
-        return f"{what}: {parts}; kept {c.get('kept')}"
+        if "folds" in c:
+            return f"{c['folds']}-fold log RMSE: {parts}; kept {c.get('kept')}"
+        text = f"leave-one-orientation-out NRMSE on the biases: {parts}"
+        mirror = c.get("mirror") or {}
+        if mirror.get("z") is not None:
+            alike = "mirror images" if mirror.get("symmetric") else "not mirror images"
+            text += f"; biases {alike} (z {mirror['z']:.2f}, limit {mirror.get('limit', float('nan')):g})"
+        four = c.get("median_all") or {}
+        if mirror.get("symmetric") and four:
+            text += "; all four orientations: " + ", ".join(f"{k} {v:.3f}" for k, v in four.items())
+        why = f" ({c['why']})" if c.get("why") else ""
+        return f"{text}; kept {c.get('kept')}{why}"
 
     def summary(self) -> str:
         """One line for a terminal: kind, why, rows."""
@@ -162,8 +175,9 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
     compare : bool
         ``kind="auto"`` only: when the row-based choice is ``kes`` and the woven-cloth
         prior (``fibre-prior``) can use every row too, compare them by
-        leave-one-orientation-out validation on this measurement and keep the better
-        (``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
+        leave-one-orientation-out validation on this measurement and keep prior +
+        residual only where it beats every comparison the data allow
+        (:func:`kesbrdf.selection.choose`; ``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
         skips it, and so does any fit option (options belong to one kind).
     **options
         Passed to the fitter; an option it does not accept is an error.
@@ -200,7 +214,7 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             name = "fibre-prior"
             mask, why_not = fitter_class(name).usable_rows(m)
             options = dict(PRIOR_CANDIDATES[comparison["kept"]])
-            why = f"{comparison['kept']} beat kes in leave-one-orientation-out validation on this data"
+            why = f"{comparison['kept']} kept by leave-one-orientation-out validation on this data ({comparison['why']})"
     cls = fitter_class(name)
     _check_options(name, cls, options, strict)
     if strict:
@@ -246,7 +260,7 @@ def _kfold_with_prior(m) -> dict | None:
 
 def _compare_with_prior(m) -> dict | None:
     """:func:`kesbrdf.selection.loo_compare` when the prior can use every row, with the
-    candidate kept (``"kes"`` unless a prior candidate has the lower median NRMSE)."""
+    candidate kept and why (:func:`kesbrdf.selection.choose`)."""
     try:
         prior_cls = fitter_class("fibre-prior")
     except (ImportError, KesbrdfError):  # the prior needs scipy (extra "fit")
@@ -260,12 +274,9 @@ def _compare_with_prior(m) -> dict | None:
         result = loo_compare(m)
     except KesbrdfError:  # too few orientations to hold one out: nothing to compare
         return None
-    med = result.get("median_biases") or {}
-    kept = "kes"
-    if "kes" in med:
-        best = min(med, key=med.get)
-        kept = best if med[best] < med["kes"] else "kes"
-    result["kept"] = kept
+    from kesbrdf.selection import choose
+
+    result["kept"], result["why"] = choose(result)
     return result
 
 

@@ -181,7 +181,12 @@ def default_fit(m: Measurement):
     """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row.
 
     Without the held-out comparison with the prior (``compare=False``): the planner fits
-    every candidate protocol many times, and a comparison costs a few prior fits each.
+    every candidate protocol many times, and a comparison costs four prior fits (the
+    leave-one-orientation-out of :func:`kesbrdf.selection.loo_compare`, ~10 s of CPU on
+    116 samples) plus the kept one, against ~0.1 s for a KES fit; it would make
+    ``kesbrdf plan`` tens of times slower, not the 2× allowed (docs/decisions.md).  The
+    mirror test and the interpolation baseline alone are cheap, but without the prior's
+    LOO they decide nothing.
     """
     from kesbrdf.fitting import fit
 

@@ -20,7 +20,8 @@ DEMO_PLAN_LIGHTS_DEG = ((30.0, 90.0), (30.0, 45.0))
 def default_vs_baselines(m, reference, model, report, say) -> dict:
     """Fit the candidates and the baselines, compare them, print one verdict per case.
 
-    Returns ``{"table": compare_models(...), "verdicts": [...], "prior_model": model}``.
+    Returns ``{"table": compare_models(...), "verdicts": [...], "headline": one line,
+    "prior_model": model}``.
     """
     from kesbrdf.baselines import compare_models, verdicts
     from kesbrdf.model import fit as kes_fit
@@ -34,12 +35,31 @@ def default_vs_baselines(m, reference, model, report, say) -> dict:
     baselines = {name: kes_fit(m, interpolation=name) for name in ("linear", "nearest")}
     table = compare_models(m, reference, models, baselines, default)
     lines = verdicts(table)
+    head = headline(table, model, report)
+    stderr(f"    {head}")
     for line in lines:
         stderr(f"    {line}")
     comparison = report.comparison_summary() if report is not None else ""
     if comparison:
         stderr(f"    kesbrdf.fit's own choice: {comparison}")
-    return {"table": table, "verdicts": lines, "prior_model": prior_res}
+    return {"table": table, "verdicts": lines, "headline": head, "prior_model": prior_res}
+
+
+def headline(table, model, report) -> str:
+    """One plain line: does the default beat linear and nearest in every case, and which model it is."""
+    d = table["default"]
+    cases = table["cases"]
+    lost = {case: [b for b in table["baselines"] if b in row and row[d]["rmse"] >= row[b]["rmse"]]
+            for case, row in cases.items()}
+    lost = {case: bases for case, bases in lost.items() if bases}
+    chosen = model.kind
+    if report is not None and report.comparison:
+        chosen += f", kept by kesbrdf.fit: {report.comparison.get('kept')}"
+    if not lost:
+        return f"verdict: the default model ({chosen}) beats linear and nearest interpolation in all {len(cases)} cases"
+    where = "; ".join(f"{case}: {' and '.join(bases)}" for case, bases in lost.items())
+    return (f"verdict: the default model ({chosen}) does NOT beat both baselines in {len(lost)} of "
+            f"{len(cases)} cases (not beaten: {where}); the reason is on that case's line below")
 
 
 def small_plan(reference, say) -> dict:
