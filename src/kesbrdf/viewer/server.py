@@ -10,7 +10,8 @@ default and serves
   "measurement": <see :func:`measurement_to_json`> or null}``;
 * ``POST /api/fit?name=<file name>[&fallback=error|log]`` with the raw CSV bytes as body:
   reads it with :func:`kesbrdf.io.measurement_csv.read_measurement`, fits it with
-  :func:`kesbrdf.fit` with its defaults (kind chosen from the data, as ``kesbrdf fit``;
+  :func:`kesbrdf.fit` with its defaults (kind chosen from the data, as ``kesbrdf fit``
+  with ``--no-compare``: the viewer draws the KES kinds, not ``fibre-prior``;
   ``fallback=error`` is ``--strict``, ``log`` the default), keeps the result in memory
   and answers like ``/api/model``.
 
@@ -232,8 +233,11 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
         prefix = str(Path(tmp)) + os.sep
         try:
             measurement = read_measurement(csv_path)
-            # the same entry point and defaults as `kesbrdf fit`; fallback=error is --strict
-            model, _report = fit(measurement, strict=fallback == "error")
+            # the same entry point and defaults as `kesbrdf fit`; fallback=error is --strict.
+            # compare=False: the viewer's shaders draw the KES kinds only, so the held-out
+            # comparison with the woven-cloth prior (which may keep a fibre-prior model) is
+            # skipped, as the demo does for its figures and renders (docs/models.md)
+            model, _report = fit(measurement, strict=fallback == "error", compare=False)
             out = Path(tmp) / (Path(safe).stem + ".kes.json")
             model.save(out)
             model_doc = json.loads(out.read_text(encoding="utf-8"))
