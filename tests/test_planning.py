@@ -100,3 +100,17 @@ def test_plan_rejects_bad_budget_and_empty_truths():
         planning.plan({"ward": _ward()}, budget=0)
     with pytest.raises(KesbrdfError, match="at least one"):
         planning.plan({}, budget=100)
+
+
+def test_fitter_names_the_kind_and_rejects_unknown_ones():
+    """`kesbrdf plan --kind`: auto is the default fit; a kind fits that kind; a typo is one line."""
+    from kesbrdf.errors import KesbrdfError
+    from kesbrdf.gonio import measure
+    from kesbrdf.planning import default_fit, fitter
+    from kesbrdf.references.ward import AnisotropicWard
+
+    assert fitter("auto") is default_fit
+    model = fitter("kes")(measure(AnisotropicWard(0.2, 0.3), protocol="paper"))
+    assert model.kind == "kes"
+    with pytest.raises(KesbrdfError, match="expected kind one of"):
+        fitter("bogus")

@@ -194,6 +194,29 @@ def default_fit(m: Measurement):
     return model
 
 
+def fitter(kind: str = "auto"):
+    """The fit a plan scores: :func:`default_fit` for ``"auto"``, else ``kesbrdf.fit(m, kind=kind)``.
+
+    ``kind="fibre-prior"`` plans for the woven-cloth prior (about 2–7 s of CPU a fit
+    against ~0.1 s for KES, so a plan costs tens of seconds): the answer for users who
+    will fit that kind, e.g. after ``kesbrdf fit`` kept it on their fabric.
+    """
+    from kesbrdf.kinds import known_fitters
+
+    if kind == "auto":
+        return default_fit
+    if kind not in known_fitters():
+        raise KesbrdfError(f"plan: expected kind one of {', '.join(('auto',) + known_fitters())}, got {kind!r}")
+
+    def fit_kind(m: Measurement):
+        from kesbrdf.fitting import fit
+
+        return fit(m, kind=kind)[0]
+
+    fit_kind.kind = kind
+    return fit_kind
+
+
 class _Truth:
     """A truth with its hemisphere values cached per light."""
 

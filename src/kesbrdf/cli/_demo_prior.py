@@ -73,7 +73,15 @@ def small_plan(reference, say) -> dict:
                   candidates=DEMO_PLAN_CANDIDATES, fit=lambda mm: kesbrdf.fit(mm, compare=False)[0],
                   lights_deg=DEMO_PLAN_LIGHTS_DEG)
     d = result.to_dict()
-    for name, p in d["protocols"].items():
-        if not p.get("over_budget"):
-            stderr(f"    {name}: {p['n_samples']} samples, expected hemisphere NRMSE {p['median']:.3f}")
+    scored = {k: p for k, p in d["protocols"].items() if not p.get("over_budget")}
+    for name, p in scored.items():
+        stderr(f"    {name}: {p['n_samples']} samples, expected hemisphere NRMSE {p['median']:.3f} (fit: {', '.join(p['kinds'])})")
+    base = scored.get("paper")
+    worse = [k for k, p in scored.items() if base and k != "paper" and p["median"] > base["median"]]
+    if worse:
+        # say why more samples score worse instead of letting the numbers look like a bug
+        stderr(f"    note: {', '.join(worse)} score worse than the paper protocol alone: the model fitted to "
+               "the larger set (kind in brackets) extrapolates worse over the hemisphere, so more samples do "
+               "not mean a better model here; `kesbrdf plan --kind fibre-prior` plans for the prior instead "
+               "(docs/planning.md)")
     return d

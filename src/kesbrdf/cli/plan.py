@@ -18,6 +18,9 @@ def add_arguments(p):
     p.add_argument("--library", action="store_true", help="plan for every built-in reference")
     p.add_argument("--budget", type=int, default=240, help="largest number of samples (default 240)")
     p.add_argument("--noise", type=float, default=0.0, help="relative measurement noise (std / value)")
+    p.add_argument("--kind", default="auto",
+                   help="model kind each protocol is fitted with: auto (kesbrdf fit --no-compare, the "
+                        "default) or a kind such as fibre-prior (slower: ~2-7 s a fit)")
     p.add_argument("-o", "--output", required=True, help="plan as JSON")
     p.add_argument("--plot", help="also draw the plan (.png, .svg or .pdf)")
 
@@ -47,9 +50,10 @@ def run(args) -> int:
         truths[Path(path).name] = as_truth
     if not truths:
         raise KesbrdfError("plan: expected --reference NAME, --model FILE or --library, got none")
-    from kesbrdf.planning import plan
+    from kesbrdf.planning import fitter, plan
 
-    result = plan(truths, budget=args.budget, noise=args.noise, progress=lambda msg: stderr(f"plan: {msg}"))
+    fit = fitter(args.kind)
+    result = plan(truths, budget=args.budget, noise=args.noise, fit=fit, progress=lambda msg: stderr(f"plan: {msg}"))
     doc = result.to_dict()
     write_text(out, json.dumps(doc, indent=1) + "\n")
     for name, p in doc["protocols"].items():
