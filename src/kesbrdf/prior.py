@@ -73,6 +73,10 @@ __all__ = [
     "evaluate_with_jacobian",
     "fresnel_dielectric",
     "THETA_D_ETA",
+    "U_NODES",
+    "V_NODES",
+    "DU",
+    "tilt_profile",
 ]
 
 FAMILY_KINDS = ("filament", "staple")
@@ -250,6 +254,14 @@ def _lobe_rho_derivative(cos_phi, rho):
 _V_NODES = (np.arange(N_V) + 0.5) * (np.pi / N_V) - np.pi / 2
 _U_NODES = (np.arange(N_U) + 0.5) * (2 * U_RANGE / N_U) - U_RANGE
 _DU = 2 * U_RANGE / N_U
+#: Public names of the fixed quadratures, for ports of the model (the Mitsuba plugin
+#: ``kesbrdf.render.prior_bsdf``): across-yarn nodes v of Ā, staple tilt nodes u, their spacing.
+V_NODES, U_NODES, DU = _V_NODES, _U_NODES, _DU
+
+
+def tilt_profile(u, u_lo, u_hi, log_s, c2):
+    """The tilt profile P(u) = σ((u − u_lo)/s)·σ((u_hi − u)/s)·exp(c₂u²), s = e^{log_s} (module docstring)."""
+    return _profile(u, u_lo, u_hi, log_s, c2)
 
 
 def _filament_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):

@@ -155,7 +155,7 @@ def _fresnel(c, eta: float):
 
 
 def _frame(w, alpha: float):
-    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.prior._family_frame."""
+    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.prior's family frame."""
     s, c = math.sin(alpha), math.cos(alpha)
     return (s * w.x - c * w.y, c * w.x + s * w.y, w.z)
 
@@ -183,8 +183,8 @@ class _Prior:
             if kind == "staple":
                 psi = p[f"{fam}_psi"]
                 # P(u)·Δu at the fixed nodes: constants of the fitted model, in float64
-                w = P._profile(P._U_NODES, lo, hi, log_s, c2) * P._DU
-                entry.update(psi=psi, nodes=[(math.sin(u), math.cos(u), float(wu)) for u, wu in zip(P._U_NODES, w)])
+                w = P.tilt_profile(P.U_NODES, lo, hi, log_s, c2) * P.DU
+                entry.update(psi=psi, nodes=[(math.sin(u), math.cos(u), float(wu)) for u, wu in zip(P.U_NODES, w)])
             self.families.append(entry)
 
     def _profile(self, u, shape):
@@ -196,7 +196,7 @@ class _Prior:
         u = dr.atan2(hy, hz)
         su, cu = dr.sin(u), dr.cos(u)
         a_bar = 0.0
-        for v in self.P._V_NODES:
+        for v in self.P.V_NODES:
             sv, cv = math.sin(v), math.cos(v)
             ci = i[0] * sv + (i[1] * su + i[2] * cu) * cv
             cr = r[0] * sv + (r[1] * su + r[2] * cu) * cv
