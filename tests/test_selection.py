@@ -9,6 +9,7 @@ score 0.145 vs kes 0.458) and Ward (the oracle is kes: 0.049 vs 0.349).
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from kesbrdf.fitting import FitReport
 from kesbrdf.gonio import measure
@@ -53,10 +54,11 @@ def test_interpolation_over_psi_predicts_from_the_neighbours():
     assert abs(loo["90"] - c / (1 - c) * shape) < EXACT
 
 
-def _result(symmetric, prior_all, interp_all, bias):
+def _result(symmetric, prior_all, interp_all, bias, interp_bias=None):
+    ib = interp_all if interp_bias is None else interp_bias
     return {"median_biases": bias, "mirror": {"z": 1.0 if symmetric else 5.0, "symmetric": symmetric},
             "median_all": {"prior": prior_all, INTERPOLATION: interp_all},
-            "interpolation": {"0": interp_all, "45": interp_all, "90": interp_all, "135": interp_all}}
+            "interpolation": {"0": interp_all, "45": ib, "90": interp_all, "135": ib}}
 
 
 def test_choose_needs_the_prior_to_beat_every_scored_comparison():
@@ -72,7 +74,9 @@ def test_choose_needs_the_prior_to_beat_every_scored_comparison():
     kept, why = choose(_result(True, 0.6, 0.5, bias))
     assert kept == "kes" and "all four orientations" in why
     # ... and prior+residual must beat it on the biases (0.05 vs 0.04)
-    assert choose(_result(True, 0.1, 0.04, bias))[0] == "kes"
+    # (the prior beats interpolation on all four, 0.1 < 0.5, so only the bias test can fail)
+    kept, why = choose(_result(True, 0.1, 0.5, bias, interp_bias=0.04))
+    assert kept == "kes" and "on the biases" in why and "all four" not in why
 
 
 def test_auto_keeps_prior_residual_on_a_symmetric_irawan_preset_and_says_why():
@@ -93,3 +97,16 @@ def test_auto_keeps_prior_residual_on_a_symmetric_irawan_preset_and_says_why():
         assert f"{name} {value:.3f}" in line
     assert "biases mirror images" in line and f"z {c['mirror']['z']:.2f}" in line
     assert "kept prior+residual (" in line and "beat interpolation over psi" in line
+
+
+def test_line_helpers_refuse_several_incidence_lines():
+    """mirror_test / orientation_interpolation_loo interpolate along one incidence line;
+    dense data (15 lines per orientation) is a one-line error, not a meaningless NRMSE."""
+    from kesbrdf.errors import MeasurementError
+    from kesbrdf.references.ward import AnisotropicWard
+    from kesbrdf.selection import mirror_test, orientation_interpolation_loo
+
+    dense = measure(AnisotropicWard(0.1, 0.3), protocol="dense", step_deg=15)
+    for helper in (mirror_test, orientation_interpolation_loo):
+        with pytest.raises(MeasurementError, match="expected one incidence line"):
+            helper(dense)

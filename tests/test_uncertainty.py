@@ -222,3 +222,19 @@ def test_validate_reports_coverage(prior_files, tmp_path, capsys):
     assert 0 <= res["within_1sigma"] <= res["within_2sigma"] <= 1
     assert main(["validate", str(d / "k.kes.json"), str(d / "meas.csv")]) == 0
     assert "carries no sigma" in capsys.readouterr().out
+
+
+def test_bad_support_is_one_error_naming_the_file_once(fitted, tmp_path):
+    """A corrupted `support` is a one-line ModelError with the file named once and the value shown."""
+    from kesbrdf.errors import KesbrdfError
+
+    _, _, path = fitted["sadeghi_satin"]
+    doc = json.loads(path.read_text())
+    doc["support"]["gamma_max_deg"] = float("nan")
+    bad = tmp_path / "bad.kes.json"
+    bad.write_text(json.dumps(doc))
+    with pytest.raises(KesbrdfError) as exc:
+        load(bad)
+    text = str(exc.value)
+    assert text.count("bad.kes.json") == 1 and "support" in text and "nan" in text.lower()
+    assert "\n" not in text

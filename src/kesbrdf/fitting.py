@@ -84,7 +84,7 @@ class FitReport:
             alike = "mirror images" if mirror.get("symmetric") else "not mirror images"
             text += f"; biases {alike} (z {mirror['z']:.2f}, limit {mirror.get('limit', float('nan')):g})"
         four = c.get("median_all") or {}
-        if mirror.get("symmetric") and four:
+        if four:  # choose() applies the all-four test in every case: show its numbers
             text += "; all four orientations: " + ", ".join(f"{k} {v:.3f}" for k, v in four.items())
         why = f" ({c['why']})" if c.get("why") else ""
         return f"{text}; kept {c.get('kept')}{why}"

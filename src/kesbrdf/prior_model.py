@@ -60,8 +60,9 @@ class FibrePriorModel(ReflectanceModel):
         #: The KES table (``kes`` or ``kes-halfdiff`` kind) fitted to the same samples:
         #: the third candidate of the σ model term (docs/prior.md §5), or None.
         self.kes = kes
-        #: Where the fit saw data: ``{"theta_d_deg": [lo, hi], "gamma_max_deg": g}``
-        #: (:func:`measured_support`), for the off-slice σ term; None in old files.
+        #: Where the fit saw data: ``{"theta_d_deg": [lo, hi], "gamma_max_deg": g,
+        #: "psi_deg": [measured orientations]}`` (:func:`measured_support`), for the
+        #: off-support σ term; None in old files (``psi_deg`` may be empty in early ones).
         self.support = dict(support) if support is not None else None
         self.channels = tuple(channels)
         self.parameters = dict(parameters or {})
@@ -158,7 +159,10 @@ class FibrePriorModel(ReflectanceModel):
                            "psi_deg": [float(v) for v in fields["support"].get("psi_deg", [])]}
                 if len(support["theta_d_deg"]) != 2 or not all(map(math.isfinite, support["theta_d_deg"]
                                                                     + [support["gamma_max_deg"]] + support["psi_deg"])):
-                    raise ModelError(f"{source or 'model'}: support: expected finite theta_d_deg [lo, hi] and gamma_max_deg")
+                    raise ModelError(f"{source or 'model'}: support: expected finite theta_d_deg [lo, hi], gamma_max_deg "
+                                     f"and psi_deg, got {fields['support']!r}")
+        except ModelError:  # already names the file and the field (ModelError is a ValueError)
+            raise
         except (KeyError, TypeError, ValueError, MeasurementError) as exc:
             raise ModelError(f"{source or 'model'}: bad fibre-prior payload ({exc})") from None
         diagnostics = dict(shared.get("diagnostics") or {})
@@ -346,7 +350,8 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_supp
       on the measured slice θ_d = 45°;
     * off support: d the distance from the measured data (:func:`support_distance`,
       eq. U2: θ_d outside the measured θ_d range, γ beyond the largest measured
-      deviation), c = ``off_support_scale`` (default :data:`OFF_SUPPORT_SCALE`, one
+      deviation, and sin θ_i times the light's azimuth gap to the nearest measured
+      orientation ψ_k, mod 180°), c = ``off_support_scale`` (default :data:`OFF_SUPPORT_SCALE`, one
       global constant chosen by leave-one-family-out, docs/prior.md §5).
 
     Logs use ε = 10⁻⁴·max f so dark regions do not dominate.  A model read from a file

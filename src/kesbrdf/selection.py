@@ -205,6 +205,16 @@ def _line(m, psi_deg: float):
     if np.count_nonzero(rows) < 3:
         return None
     ti = np.degrees(m.theta_i[rows])
+    sums = ti + np.degrees(m.theta_r[rows])
+    if np.ptp(sums) > 0.5 or np.unique(np.round(ti, 6)).size != ti.size:
+        # interpolation along θ_i below needs one incidence line θ_i + θ_r = const (the
+        # paper's protocol); several lines would mix into a meaningless curve
+        from kesbrdf.errors import MeasurementError
+
+        raise MeasurementError(
+            f"{m.source or 'measurement'}: psi = {psi_deg:g} deg: expected one incidence line (theta_i + theta_r "
+            f"constant, each theta_i once), got theta_i + theta_r from {sums.min():.1f} to {sums.max():.1f} deg "
+            f"over {ti.size} rows")
     order = np.argsort(ti)
     sigma = None if m.uncertainty is None else np.asarray(m.uncertainty, float)[rows][order]
     return ti[order], m.values[rows][order], np.degrees(m.theta_r[rows])[order], sigma
@@ -261,7 +271,8 @@ def mirror_test(measurement) -> dict:
         return {"symmetric": None}
     ra, rb = _relative_noise(a), _relative_noise(b)
     # mirrored 135° samples: θ_i' = θ_r, ascending
-    tb, vb, sb = b[2][::-1], b[1][::-1], (rb * np.abs(b[1]))[::-1]
+    back = np.argsort(b[2])  # θ_r ascending (on one line it is θ_i descending)
+    tb, vb, sb = b[2][back], b[1][back], (rb * np.abs(b[1]))[back]
     va = a[1]
     mb, msb = _on(tb, vb, a[0]), _on(tb, sb, a[0])
     ok = np.all(np.isfinite(mb), axis=-1)

@@ -140,3 +140,12 @@ def test_argument_errors_are_one_line(argv, expected, capsys):
     assert expected in lines[0]
     assert lines[0].startswith(f"kesbrdf {argv[0]}: error:")
     assert f"(see 'kesbrdf {argv[0]} --help')" in lines[0]
+
+
+def test_a_mistyped_top_level_flag_is_the_top_level_parser_s_error(capsys):
+    """`kesbrdf --bogus fit ...`: the flag is before the command, so the command is not blamed."""
+    with pytest.raises(SystemExit) as exc:
+        main(["--bogus", "fit", "m.csv", "-o", "m.json"])
+    assert exc.value.code == 2
+    line = capsys.readouterr().err.strip()
+    assert line.startswith("kesbrdf: error: unrecognized arguments: --bogus") and "\n" not in line

@@ -94,7 +94,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args, extra = parser.parse_known_args(argv)
     if extra:  # name the command whose flags were mistyped, not the top-level parser
-        getattr(args, "_parser", parser).error(f"unrecognized arguments: {' '.join(extra)}")
+        words = list(sys.argv[1:] if argv is None else argv)
+        command = getattr(args, "command", None)
+        before_command = (command in words and extra[0] in words
+                          and words.index(extra[0]) < words.index(command))
+        owner = parser if before_command else getattr(args, "_parser", parser)
+        owner.error(f"unrecognized arguments: {' '.join(extra)}")
     if not getattr(args, "_run", None):
         parser.print_help()
         return EXIT_USER_ERROR
