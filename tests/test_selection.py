@@ -110,3 +110,13 @@ def test_line_helpers_refuse_several_incidence_lines():
     for helper in (mirror_test, orientation_interpolation_loo):
         with pytest.raises(MeasurementError, match="expected one incidence line"):
             helper(dense)
+
+
+def test_choose_refuses_a_prior_that_misses_the_mirrored_bias():
+    """Mirror images: kes predicts the held-out bias to the noise (0.02); a prior + residual
+    at 0.48 there failed its fit (a Sadeghi satin seen by a user) and must not be kept."""
+    bias = {"kes": 0.02, "prior": 0.5, "prior+residual": 0.483}
+    kept, why = choose(_result(True, 0.1, 0.7, bias, interp_bias=0.9))
+    assert kept == "kes" and "misses the mirrored bias" in why
+    # within MIRROR_Z x the noise level it is kept (the demo satin: 0.0025 vs kes 0.0017)
+    assert choose(_result(True, 0.1, 0.7, {**bias, "prior+residual": 0.0025, "kes": 0.0017}, interp_bias=0.9))[0] == "prior+residual"

@@ -140,6 +140,11 @@ def test_scenes_draw_a_fibre_prior_file_with_this_plugin(render_module, prior_fi
     scene = load_scene(path, "sphere", RenderOptions(resolution=(16, 12), spp=1))
     cloth = [s for s in scene.shapes() if s.id() == "cloth"][0]
     assert str(cloth.bsdf()).startswith("FibrePriorBSDF[")
+    # a KES-only option is refused, not dropped silently
+    from kesbrdf.errors import KesbrdfError
+
+    with pytest.raises(KesbrdfError, match="applies to kes models only"):
+        bsdf_dict(path, RenderOptions(mapping="halfvector"))
 
 
 def test_wrong_kind_is_rejected_in_one_line(render_module, tmp_path):

@@ -209,6 +209,9 @@ def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
     }
     if kind == "kes":
         d["mapping"] = opts.mapping
+    elif opts.mapping != "deviation":  # never ignore an option silently
+        raise KesbrdfError(f"mapping {opts.mapping!r} applies to kes models only; a {kind} model has its own "
+                           "parametrisation (drop --mapping)")
     if opts.extrapolation != "hold":
         d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
