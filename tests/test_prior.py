@@ -230,3 +230,25 @@ def test_residual_reproduces_dense_protocol_samples():
     fields, arrays = model.to_payload()
     again = FibrePriorModel.from_payload(fields, arrays, {"channels": model.channels})
     np.testing.assert_array_equal(again.evaluate(m.wi, m.wr), pred)
+
+
+def test_few_off_slice_samples_keep_the_fixed_theta_d_law():
+    """Eight out-of-plane samples beside the paper line are too few for the free θ_d law
+    (d₂ ran to its bound and the law to 10⁴× at θ_i = 70°); the Fresnel law stays fixed,
+    and the model stays bounded at a light the samples never saw."""
+    from kesbrdf.geometry import spherical_to_cartesian
+    from kesbrdf.planning import PROTOCOLS, simulate
+    from kesbrdf.prior import MIN_THETA_D_SAMPLES, fit_prior
+    from kesbrdf.references.registry import make_reference
+
+    ref = make_reference("sadeghi-satin")
+    m = simulate(ref, PROTOCOLS["paper+out-of-plane"])
+    off = np.count_nonzero(np.abs(np.sum(m.wi * m.wr, axis=-1)) > 0.05)
+    assert 0 < off < MIN_THETA_D_SAMPLES
+    prior = fit_prior(m)
+    assert not prior.report["free_theta_d"]
+    wi = spherical_to_cartesian(np.radians(70.0), np.radians(45.0))
+    wr = spherical_to_cartesian(np.radians(np.linspace(0, 80, 9)), np.radians(225.0))
+    wi = np.broadcast_to(wi, wr.shape)
+    # bounded: within 10x of the reference's brightest value on this arc (the failure was 10^4)
+    assert np.max(prior(wi, wr)) < 10 * np.max(ref(wi, wr))

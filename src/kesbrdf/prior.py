@@ -97,6 +97,11 @@ MULTISTART_MAX_ROWS = 240
 START_NFEV = 40
 #: Spread of ωi·ωr above which the θ_d law gets free coefficients d₁, d₂.
 THETA_D_SPREAD = 0.05
+#: Fewest samples off the θ_d = 45° slice (|ωi·ωr| > THETA_D_SPREAD) for the free θ_d law:
+#: 16 = one specular group at each of the four orientations, the smallest θ_d extension
+#: `kesbrdf plan` offers.  Eight out-of-plane samples once drove d₂ to its bound and the
+#: law to 10⁴× at θ_i = 70° (a user's plan); with fewer, the Fresnel law stays fixed.
+MIN_THETA_D_SAMPLES = 16
 
 
 def fresnel_dielectric(cos_t, eta: float = THETA_D_ETA):
@@ -712,7 +717,8 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
         measurement's ``frame`` metadata says it is a sample frame.
     free_theta_d : "auto" or bool
         Free θ_d-law coefficients; "auto" = when ωi·ωr spreads more than
-        :data:`THETA_D_SPREAD` (never in the paper protocol, where it is 0).
+        :data:`THETA_D_SPREAD` and at least :data:`MIN_THETA_D_SAMPLES` samples lie off
+        the θ_d = 45° slice (never in the paper protocol, where ωi·ωr = 0).
     rows : bool array, optional
         Rows to use.
 
@@ -726,7 +732,9 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     if free_axes == "auto":
         free_axes = "sample frame" in str(m.metadata.get("frame", "")).lower()
     if free_theta_d == "auto":
-        free_theta_d = float(np.std(np.sum(d.wi * d.wr, axis=-1))) > THETA_D_SPREAD
+        x = np.sum(d.wi * d.wr, axis=-1)
+        free_theta_d = (float(np.std(x)) > THETA_D_SPREAD
+                        and int(np.count_nonzero(np.abs(x) > THETA_D_SPREAD)) >= MIN_THETA_D_SAMPLES)
     C = d.y.shape[1]
     variants = [("filament", "filament")] if kinds == "auto" else [tuple(kinds)]
     if kinds == "auto":
