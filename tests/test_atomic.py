@@ -112,3 +112,16 @@ def test_sigkill_mid_write_keeps_the_target_and_the_next_run_cleans_up(tmp_path)
     write_text(target, "new model")
     assert target.read_text() == "new model"
     assert _hidden(tmp_path) == []
+
+
+def test_a_directory_as_target_is_named_not_the_temporary(tmp_path):
+    """`-o somedir`: the error names somedir (the CLI prints `somedir: expected a file ...`),
+    and nothing is left behind in it or beside it."""
+    from kesbrdf._atomic import write_text
+
+    target = tmp_path / "adir"
+    target.mkdir()
+    with pytest.raises(IsADirectoryError) as exc:
+        write_text(target, "x")
+    assert exc.value.filename == str(target) and "directory" in exc.value.strerror
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["adir"] and not any(target.iterdir())

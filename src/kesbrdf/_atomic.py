@@ -17,6 +17,7 @@ beside the target.  They are removed
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import re
 import tempfile
@@ -104,6 +105,8 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
     ('hi', ['x.txt'])
     """
     path = Path(path)
+    if path.is_dir():  # name the target, not the temporary file the rename would fail on
+        raise IsADirectoryError(errno.EISDIR, "expected a file to write, got a directory", str(path))
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale(path)
     suffix = ".part" + (path.suffix if keep_suffix else "")

@@ -21,6 +21,7 @@ def add_arguments(p):
     p.add_argument("--kind", choices=("auto",) + known_fitters(), default="auto",
                    help="auto (default): the kind that uses every row; kes: the paper's table rho(phi, gamma); "
                    "kes-halfdiff: KES per (theta_h, theta_d) for several incidence angles per orientation; "
+                   "fibre-prior: the woven-cloth prior times a KES residual (docs/prior.md); "
                    "scattered: a kes table fitted to general geometries")
     p.add_argument("--orientations", type=int, choices=(3, 4), default=None,
                    help="3 = paper eq. 1-2; 4 = with the 135 deg bias (default when measured)")

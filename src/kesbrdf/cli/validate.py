@@ -46,7 +46,8 @@ def run(args) -> int:
             result["uncertainty"] = cov
             print(f"uncertainty: {cov['within_1sigma']:.0%} of the samples within 1 sigma, "
                   f"{cov['within_2sigma']:.0%} within 2 sigma (Gaussian: 68%, 95%); "
-                  f"median sigma of ln f {cov['median_sigma_log']:.3f}")
+                  f"median sigma of ln f {cov['median_sigma_log']:.3f} (on the samples the model was fitted to "
+                  "this is a check, not a calibration: give validate held-out data to calibrate)")
     else:
         print(f"uncertainty: none (kind {model.kind!r} carries no sigma; only fibre-prior models do)")
     if args.json_out:
