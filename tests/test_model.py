@@ -139,3 +139,21 @@ def test_dense_data_uses_the_90_degree_line():
     model = fit(m)
     assert model.diagnostics["incidence_line_deg"] == pytest.approx(90.0)
     assert model.diagnostics["unused_rows"] > 0
+
+
+def test_kes_table_has_no_spike_where_k_nears_zero():
+    """Where K(φ) = 1/ρ comes close to 0 without crossing it, ρ = 1/K spiked (a user's
+    satin: B = 6.3 1/sr at γ = 80°, neighbours and truth ≈ 0.05–0.07).  Such rows now
+    fall back like K ≤ 0, so no table value exceeds OVERSHOOT × the brightest measured
+    orientation at its γ (the bound is the rule itself; the log fallback is held within
+    the measured range)."""
+    from kesbrdf.model import OVERSHOOT
+    from kesbrdf.references.registry import make_reference
+
+    m = measure(make_reference("sadeghi-satin"), noise=0.01, rng=1)
+    model = fit(m, fallback="log")
+    brightest = np.nanmax(model.q_nodes, axis=1)  # (γ nodes, C), body included
+    # compare on the γ nodes (the table's γ grid interpolates linearly between them)
+    rows = [int(np.argmin(np.abs(model.gamma_grid - g))) for g in model.gamma_nodes]
+    assert np.all(model.table[:, rows, :] <= OVERSHOOT * brightest[None] * (1 + 1e-9))
+    assert 80.0 in [round(g) for g in model.diagnostics["fallback_gamma_deg"]]

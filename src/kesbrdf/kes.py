@@ -148,8 +148,16 @@ def interpolate_circle(K_half, phi, orientations: int = 4) -> np.ndarray:
 
 
 def interpolate_circle_log(q_half, phi, orientations: int = 4) -> np.ndarray:
-    """Fallback (DESIGN §3): the same interpolation applied to log q; returns q(φ) > 0."""
+    """Fallback (DESIGN §3): the same interpolation applied to log q; returns q(φ) > 0.
+
+    log q(φ) is held within the range of the used half-samples (per row and channel): the
+    trigonometric interpolant overshoots between them, and in log space an overshoot is a
+    factor.  The result still passes through every half-sample.
+    """
     q_half = np.asarray(q_half, float)
     if np.any(q_half <= 0):
         raise KESError("log interpolation needs positive q at every half-sample")
-    return np.exp(interpolate_circle(np.log(q_half), phi, orientations))
+    logs = np.log(q_half)
+    used = logs[..., half_slots(orientations)]
+    out = interpolate_circle(logs, phi, orientations)
+    return np.exp(np.clip(out, used.min(axis=-1, keepdims=True), used.max(axis=-1, keepdims=True)))

@@ -67,6 +67,9 @@ __all__ = [
 
 INTERPOLATIONS = ("kes", "nearest", "linear")
 FALLBACKS = ("error", "log")
+#: Interpolated ρ above this multiple of the brightest measured orientation at a γ is a
+#: spike of the KES interpolant (K = 1/ρ near 0), handled like K ≤ 0 (docs/models.md).
+OVERSHOOT = 4.0
 
 #: Orientation match tolerance when recognising ψ = 0/45/90/135° in a file.
 ORIENTATION_TOL = math.radians(0.5)
@@ -661,14 +664,18 @@ def fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallba
     # KES on K = 1/q, vectorised over γ and channels
     K_half = 1.0 / q_half  # slots 3, 7 are NaN with 3 orientations and ignored
     K = kes.interpolate_circle(np.transpose(K_half, (0, 2, 1)), phi_grid, orientations)  # (γ, C, φ)
-    bad = np.any(~(K > 0), axis=2)  # (γ, C)
+    # the KES form fails where K(φ) leaves the range it can represent: K ≤ 0 (ρ infinite or
+    # negative) or K below 1/OVERSHOOT of the smallest measured K (ρ more than OVERSHOOT
+    # times the brightest measured orientation at that γ, a spike of the interpolant)
+    K_floor = np.nanmin(K_half[:, slots, :], axis=1) / OVERSHOOT  # (γ, C)
+    bad = np.any(~(K > K_floor[:, :, None]), axis=2)  # (γ, C)
     fallback_gamma = []
     if bad.any():
         bad_gamma = np.flatnonzero(bad.any(axis=1))
         if fallback == "error":
             g = bad_gamma[0]
             raise KESError(
-                f"K(phi) = 1/rho <= 0 between the measured orientations at gamma = "
+                f"K(phi) = 1/rho <= 0 (or rho > {OVERSHOOT:g}x the brightest orientation) between the measured orientations at gamma = "
                 f"{math.degrees(gamma_grid[g]):.4g} deg ({bad_gamma.size} gamma value(s) affected): "
                 "warp and weft differ too much for the KES form; use fallback='log' "
                 "(the default; kesbrdf fit without --strict) to interpolate log rho there instead"
