@@ -149,3 +149,14 @@ def test_a_mistyped_top_level_flag_is_the_top_level_parser_s_error(capsys):
     assert exc.value.code == 2
     line = capsys.readouterr().err.strip()
     assert line.startswith("kesbrdf: error: unrecognized arguments: --bogus") and "\n" not in line
+
+
+def test_export_agreement_is_one_short_line():
+    """An analytic fit's record prints its error numbers, not a repr of its parameters."""
+    from kesbrdf.cli.export import agreement_line
+
+    line = agreement_line({"fit": {"material": "gltf_pbr", "params": {"base_color": [0.1, 0.2, 0.3]},
+                                   "error": {"nrmse": 0.52812, "rel_l1": 0.37}},
+                           "exact": False, "median_rel_err": 0.0178})
+    assert line == "fit gltf_pbr: nrmse 0.5281, rel_l1 0.37; exact=False; median_rel_err=0.0178"
+    assert "base_color" not in line and "\n" not in line

@@ -47,6 +47,26 @@ def _number(v) -> str:
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
+def agreement_line(agreement: dict) -> str:
+    """One readable line of an export's agreement with the model.
+
+    Scalars print as ``name=value``; a nested record (an analytic fit: material,
+    parameters, error) prints only its error numbers, e.g. ``fit gltf_pbr: nrmse 0.528,
+    nrmse_theta_le_70 0.46``.  The parameters are in the exported file itself.
+    """
+    parts = []
+    for key, value in agreement.items():
+        if not isinstance(value, dict):
+            parts.append(f"{key}={_number(value)}")
+            continue
+        err = value.get("error") if isinstance(value.get("error"), dict) else value
+        numbers = ", ".join(f"{k} {_number(v)}" for k, v in err.items()
+                            if isinstance(v, (int, float)) and not isinstance(v, bool))
+        label = f"{key} {value['material']}" if isinstance(value.get("material"), str) else key
+        parts.append(f"{label}: {numbers}" if numbers else label)
+    return "; ".join(parts)
+
+
 def run(args) -> int:
     from kesbrdf.errors import ExportError
     from kesbrdf.export import export, format_module, format_names
@@ -65,7 +85,7 @@ def run(args) -> int:
     if len(result.paths) > 1:
         print(f"total {_size(result.size)}")
     if result.agreement:
-        print("agreement with the model: " + ", ".join(f"{k}={_number(v)}" for k, v in result.agreement.items()))
+        print("agreement with the model: " + agreement_line(result.agreement))
     for note in result.notes:
         print(f"note: {note}")
     if result.open_with:
