@@ -205,6 +205,31 @@ class FabricBSDF(mi.BSDF):
     Mitsuba's ``si.wi`` points to the camera (the paper's ω_r) and ``wo`` to the light (ω_i).
     """
 
+    def _set_flags(self):
+        """Mitsuba's component flags: an anisotropic glossy lobe and a diffuse body, both
+        sides when ``two_sided``.  Call after setting ``two_sided``."""
+        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
+        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        if self.two_sided:
+            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
+            flags_body = flags_body | mi.BSDFFlags.BackSide
+        self.m_components = [flags_lobe, flags_body]
+        self.m_flags = flags_lobe | flags_body
+
+    @staticmethod
+    def _table_sampler(q_mean, phi_grid, gamma_grid, body, sampling, mapping="halfvector"):
+        """The lobe/cosine mixture sampler of a tabulated lobe q_mean(φ, γ) over a body
+        (1/sr): lobe weight from the lobe's albedo proxy against π·mean(body), 0 for
+        ``sampling="cosine"`` (:mod:`kesbrdf.render.sampling`)."""
+        if sampling == "cosine":
+            weight = 0.0
+        else:
+            lobe = _sampling.lobe_albedo_proxy(q_mean, phi_grid, gamma_grid)
+            weight = _sampling.lobe_weight(lobe, math.pi * float(np.mean(body)))
+        return _sampling.LobeSampler(
+            _sampling.lobe_density_table(q_mean, gamma_grid, mapping), float(gamma_grid[-1]), mapping, weight
+        )
+
     def _orient(self, si, wo):
         """Fabric-frame (ω_r, ω_i) with the back side mirrored when two-sided."""
         wr = mi.Vector3f(si.wi)
@@ -307,28 +332,9 @@ class KesBSDF(FabricBSDF):
         self.gamma_max = self.table.gamma_max
         self.body = mi.Color3f(*[float(b) for b in body])
 
-        q_mean = table.mean(axis=-1)
-        if sampling == "cosine":
-            weight = 0.0
-        else:
-            lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, model.gamma_grid)
-            diffuse = math.pi * float(np.mean(body))
-            weight = _sampling.lobe_weight(lobe, diffuse)
         self.sampling = sampling
-        self.sampler = _sampling.LobeSampler(
-            _sampling.lobe_density_table(q_mean, model.gamma_grid, mapping),
-            self.gamma_max,
-            mapping,
-            weight,
-        )
-
-        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
-        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-        if self.two_sided:
-            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
-            flags_body = flags_body | mi.BSDFFlags.BackSide
-        self.m_components = [flags_lobe, flags_body]
-        self.m_flags = flags_lobe | flags_body
+        self.sampler = self._table_sampler(table.mean(axis=-1), model.phi_grid, model.gamma_grid, body, sampling, mapping)
+        self._set_flags()
 
     # -- evaluation ------------------------------------------------------------
     def _phi_gamma(self, wi, wr):

@@ -36,7 +36,6 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
-from kesbrdf.render import sampling as _sampling
 from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, parse_rgb
 
 __all__ = ["HalfDiffBSDF", "HalfDiffTable", "half_diff", "register", "check_halfdiff_model"]
@@ -139,23 +138,9 @@ class HalfDiffBSDF(FabricBSDF):
         sampling = str(_prop(props, "sampling", "lobe"))
         q_mean = table.mean(axis=(2, 3))  # (φ_h, θ_h)
         gamma_grid = 2.0 * np.asarray(model.theta_h_grid, float)
-        if sampling == "cosine":
-            weight = 0.0
-        else:
-            lobe = _sampling.lobe_albedo_proxy(q_mean, model.phi_grid, gamma_grid)
-            diffuse = math.pi * float(np.mean(body))
-            weight = _sampling.lobe_weight(lobe, diffuse)
         self.sampling = sampling
-        self.sampler = _sampling.LobeSampler(
-            _sampling.lobe_density_table(q_mean, gamma_grid, "halfvector"), float(gamma_grid[-1]), "halfvector", weight
-        )
-        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
-        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-        if self.two_sided:
-            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
-            flags_body = flags_body | mi.BSDFFlags.BackSide
-        self.m_components = [flags_lobe, flags_body]
-        self.m_flags = flags_lobe | flags_body
+        self.sampler = self._table_sampler(q_mean, model.phi_grid, gamma_grid, body, sampling)
+        self._set_flags()
 
     def f_r(self, wi, wr, active=True):
         """f_r (1/sr) for light ω_i and viewer ω_r in the fabric frame."""

@@ -52,7 +52,6 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
-from kesbrdf.render import sampling as _sampling
 from kesbrdf.render.bsdf import EXTRAPOLATIONS, SAMPLINGS, FabricBSDF, KesTable, parse_rgb, phi_gamma
 from kesbrdf.render.halfdiff_bsdf import HalfDiffTable, half_diff
 
@@ -318,21 +317,8 @@ class FibrePriorBSDF(FabricBSDF):
 
         q_mean, phi_grid, gamma_grid = lobe_table(model)
         q_mean = q_mean * float(np.mean(tint))
-        if sampling == "cosine":
-            weight = 0.0
-        else:
-            lobe = _sampling.lobe_albedo_proxy(q_mean, phi_grid, gamma_grid)
-            weight = _sampling.lobe_weight(lobe, math.pi * float(np.mean(body)))
-        self.sampler = _sampling.LobeSampler(
-            _sampling.lobe_density_table(q_mean, gamma_grid, "halfvector"), float(gamma_grid[-1]), "halfvector", weight
-        )
-        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
-        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-        if self.two_sided:
-            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
-            flags_body = flags_body | mi.BSDFFlags.BackSide
-        self.m_components = [flags_lobe, flags_body]
-        self.m_flags = flags_lobe | flags_body
+        self.sampler = self._table_sampler(q_mean, phi_grid, gamma_grid, body, sampling)
+        self._set_flags()
 
     def f_model(self, wi, wr):
         """The model's f_r = f_prior · r^τ (Color3f) for unit directions above the horizon."""

@@ -291,13 +291,7 @@ class ReferenceBSDF(FabricBSDF):
             raise KesbrdfError(f"kesbrdf_reference: unknown sampling {sampling!r}; expected one of {', '.join(_SAMPLINGS)}")
         self.sampling = sampling
         self.sampler = _make_sampler(self.ref, sampling)
-        flags_lobe = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.Anisotropic
-        flags_body = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-        if self.two_sided:
-            flags_lobe = flags_lobe | mi.BSDFFlags.BackSide
-            flags_body = flags_body | mi.BSDFFlags.BackSide
-        self.m_components = [flags_lobe, flags_body]
-        self.m_flags = flags_lobe | flags_body
+        self._set_flags()
 
     def f_r(self, wi, wr, active=True):
         """f_r (1/sr) for light ω_i and viewer ω_r (fabric frame); 0 below the horizon."""
