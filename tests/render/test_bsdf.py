@@ -8,6 +8,11 @@ import pytest
 from kesbrdf.brdf import evaluate
 from kesbrdf.diagnostics import directional_albedo
 from kesbrdf.geometry import spherical_to_cartesian
+from bsdf_helpers import eval_cos, random_pairs
+
+_pairs = random_pairs
+_eval = eval_cos
+
 
 pytestmark = pytest.mark.render
 
@@ -22,11 +27,6 @@ FURNACE_SIGMAS = 5.0
 ALBEDO_QUADRATURE_RTOL = 5e-3
 
 
-def _pairs(rng, n=4000, min_cos=0.05):
-    wi = spherical_to_cartesian(np.arccos(rng.uniform(min_cos, 1, n)), rng.uniform(0, 2 * np.pi, n))
-    wr = spherical_to_cartesian(np.arccos(rng.uniform(min_cos, 1, n)), rng.uniform(0, 2 * np.pi, n))
-    # compare on the directions the plugin actually receives (float32)
-    return wi.astype(np.float32).astype(float), wr.astype(np.float32).astype(float)
 
 
 def _load(path, **kw):
@@ -35,14 +35,6 @@ def _load(path, **kw):
     return mi.load_dict({"type": "kesbrdf", "filename": str(path), **kw})
 
 
-def _eval(bsdf, wi, wr):
-    """Mitsuba eval (f·cos θ_i) with si.wi = viewer, wo = light; returns (N, 3)."""
-    import drjit as dr
-    import mitsuba as mi
-
-    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
-    si.wi = mi.Vector3f(*wr.T)
-    return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T
 
 
 @pytest.mark.parametrize("mapping", ["deviation", "halfvector"])

@@ -6,7 +6,15 @@ import math
 import numpy as np
 import pytest
 
-from kesbrdf.geometry import spherical_to_cartesian
+from bsdf_helpers import eval_cos, random_pairs
+
+_pairs = random_pairs
+
+
+def _eval(bsdf, wi, wr):
+    """f_r (N, 3): Mitsuba's eval with the cosine divided out."""
+    return eval_cos(bsdf, wi, wr) / wi[:, 2:3]
+
 
 pytestmark = pytest.mark.render
 
@@ -63,10 +71,6 @@ def _in_tmp(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
 
 
-def _pairs(rng, n=4000, min_cos=0.05):
-    wi = spherical_to_cartesian(np.arccos(rng.uniform(min_cos, 1, n)), rng.uniform(0, 2 * np.pi, n))
-    wr = spherical_to_cartesian(np.arccos(rng.uniform(min_cos, 1, n)), rng.uniform(0, 2 * np.pi, n))
-    return wi.astype(np.float32).astype(float), wr.astype(np.float32).astype(float)
 
 
 def _load(path, **kw):
@@ -75,14 +79,6 @@ def _load(path, **kw):
     return mi.load_dict({"type": "kesbrdf_prior", "filename": str(path), **kw})
 
 
-def _eval(bsdf, wi, wr):
-    """Mitsuba eval with si.wi = viewer, wo = light, cosine divided out: f_r, (N, 3)."""
-    import drjit as dr
-    import mitsuba as mi
-
-    si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
-    si.wi = mi.Vector3f(*wr.T)
-    return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T / wi[:, 2:3]
 
 
 @pytest.mark.parametrize("name", ["paper-filament", "paper-staple", "dense-staple", "pure-prior"])
