@@ -27,6 +27,7 @@ import numpy as np
 from kesbrdf._atomic import atomic_path
 from kesbrdf.acquisition.sensor import RESPONSES, srgb_decode
 from kesbrdf.errors import FormatError, validate_choice, where
+from kesbrdf.io.files import open_regular
 
 __all__ = [
     "Frame",
@@ -83,7 +84,7 @@ class Frame:
 def sha256_file(path) -> str:
     """SHA-256 of a file's bytes (hex)."""
     digest = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):
             digest.update(block)
     return digest.hexdigest()
@@ -101,7 +102,7 @@ def _as_hwc(array: np.ndarray, path: Path) -> np.ndarray:
 
 def _png_ihdr(path: Path) -> tuple[int, int]:
     """(bit depth, colour type) from a PNG's IHDR chunk; the declared size is checked."""
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         head = fh.read(33)
     if len(head) < 26 or head[:8] != b"\x89PNG\r\n\x1a\n":
         raise FormatError(f"{where(path)}expected a PNG file, got bytes that do not start with the PNG signature")
@@ -181,8 +182,7 @@ def read_image(path) -> Frame:
         raise FormatError(
             f"{where(path)}expected an image with suffix {', '.join(IMAGE_SUFFIXES)}, got {suffix or 'none'}"
         )
-    if not path.is_file():
-        raise FileNotFoundError(2, "No such file", str(path))
+    open_regular(path).close()  # missing: FileNotFoundError; a FIFO, device or folder: FormatError
     try:
         array = _READERS[suffix](path)
     except (FormatError, ImportError):

@@ -45,6 +45,7 @@ from pathlib import Path
 from kesbrdf._atomic import write_text
 from kesbrdf.acquisition.sensor import RESPONSES
 from kesbrdf.errors import FormatError, validate_choice, where
+from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
 
 __all__ = [
@@ -137,7 +138,7 @@ def read_manifest(path) -> Manifest:
         Any format problem (see the module docstring).
     """
     path = Path(path)
-    return parse_manifest(decode_text(path.read_bytes(), path), path)
+    return parse_manifest(decode_text(read_regular(path), path), path)
 
 
 def _parse_float(text: str, column: str, path, line: int) -> float:

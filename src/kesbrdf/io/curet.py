@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf.errors import FormatError, MeasurementError, where
+from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import parse_number, split_lines
 from kesbrdf.measurement import Measurement
 
@@ -90,7 +91,7 @@ def _numbers(fields, path: Path, lineno: int) -> list[float]:
 
 def _numeric_rows(path: Path, n_fields: int, what: str):
     """(line numbers, float array (rows, n_fields)) of a whitespace-separated file."""
-    data = path.read_bytes()
+    data = read_regular(path)
     text = _decode_ascii(data, path, what)
     linenos, rows = [], []
     for lineno, raw in split_lines(text, path):
@@ -173,7 +174,7 @@ def read_curet(table_path, abrdf_path, sample) -> Measurement:
     abrdf_path = Path(abrdf_path)
     theta_v, phi_v, theta_i, phi_i, table_sha = read_table(table_path)
     n = theta_v.size
-    data = abrdf_path.read_bytes()
+    data = read_regular(abrdf_path)
     # the row length is checked against the table, so read rows of any length first
     text = _decode_ascii(data, abrdf_path, "abrdf")
     found = None

@@ -18,6 +18,7 @@ import numpy as np
 
 from kesbrdf._atomic import write_text
 from kesbrdf.errors import FormatError, MeasurementError, validate_choice, where
+from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
 from kesbrdf.measurement import Measurement
 
@@ -60,7 +61,7 @@ def read_measurement(path) -> Measurement:
         Duplicate geometries with conflicting values.
     """
     path = Path(path)
-    data = path.read_bytes()
+    data = read_regular(path)
     return parse_measurement(decode_text(data, path), source=str(path), sha256=_sha256(data))
 
 

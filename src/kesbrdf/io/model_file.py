@@ -24,6 +24,7 @@ import numpy as np
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
+from kesbrdf.io.files import read_regular
 from kesbrdf.kinds import kind_class
 
 __all__ = [
@@ -146,7 +147,7 @@ def load_model(path):
         size = 0
     if size > MAX_FILE_BYTES:
         raise ModelError(f"{where(path)}expected a model file of at most {MAX_FILE_BYTES} bytes, got {size}")
-    raw = path.read_bytes()
+    raw = read_regular(path)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:

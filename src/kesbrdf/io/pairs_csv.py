@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf.errors import FormatError, where
+from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
 
 __all__ = ["PAIR_COLUMNS", "read_pairs", "parse_pairs"]
@@ -40,7 +41,7 @@ def read_pairs(path) -> np.ndarray:
         a short row; the message names ``file:line``.
     """
     path = Path(path)
-    return parse_pairs(decode_text(path.read_bytes(), path), path)
+    return parse_pairs(decode_text(read_regular(path), path), path)
 
 
 def parse_pairs(text: str, source: object = "<string>") -> np.ndarray:

@@ -26,6 +26,7 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import FormatError, where
+from kesbrdf.io.files import read_regular
 
 __all__ = ["PlyMesh", "write_ply", "read_ply", "vertex_normals"]
 
@@ -160,7 +161,7 @@ def read_ply(path: str | os.PathLike) -> PlyMesh:
         the message names the file and the header line.
     """
     path = Path(path)
-    data = path.read_bytes()
+    data = read_regular(path)
     end = data.find(b"end_header\n")
     if not data.startswith(b"ply\n") or end < 0:
         raise FormatError(f"{where(path, 1)}expected a PLY header ('ply' ... 'end_header'), got none")

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf.errors import FormatError, where
+from kesbrdf.io.files import read_regular
 
 __all__ = ["read_tensor_file", "write_tensor_file", "tensor_file_bytes", "DTYPE_CODES", "MAGIC"]
 
@@ -100,7 +101,7 @@ def read_tensor_file(path) -> dict:
     """
     path = Path(path)
     try:
-        data = path.read_bytes()
+        data = read_regular(path)
     except OSError as exc:
         raise FormatError(f"{where(path)}expected a readable RGL tensor file (*.bsdf), got {exc.strerror}") from exc
     if data[: len(MAGIC)] != MAGIC:

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf.errors import FormatError, where
+from kesbrdf.io.files import read_regular
 
 __all__ = ["MERLBinary", "DIMS", "SCALE", "half_diff", "bin_index"]
 
@@ -94,7 +95,7 @@ class MERLBinary:
     def __init__(self, path):
         self.path = Path(path)
         try:
-            raw = self.path.read_bytes()
+            raw = read_regular(self.path)
         except OSError as exc:
             raise FormatError(f"{where(self.path)}expected a readable MERL .binary file, got {exc.strerror}") from exc
         if len(raw) < 12:
