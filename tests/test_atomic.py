@@ -125,3 +125,33 @@ def test_a_directory_as_target_is_named_not_the_temporary(tmp_path):
         write_text(target, "x")
     assert exc.value.filename == str(target) and "directory" in exc.value.strerror
     assert sorted(p.name for p in tmp_path.iterdir()) == ["adir"] and not any(target.iterdir())
+
+
+def test_the_file_is_fsynced_before_the_rename_and_its_folder_after(tmp_path, monkeypatch):
+    """A power cut after the rename must not leave an empty target: the data reaches the
+    disk (fsync of the temporary) before the rename, the rename after (fsync of the folder)."""
+    import os
+
+    from kesbrdf._atomic import write_bytes
+
+    events = []
+    real_fsync, real_replace = os.fsync, os.replace
+
+    def fsync(fd):
+        events.append(("fsync", os.path.realpath(f"/proc/self/fd/{fd}") if os.path.exists("/proc/self/fd")
+                       else fd))
+        real_fsync(fd)
+
+    def replace(src, dst):
+        events.append(("replace", os.fspath(dst)))
+        real_replace(src, dst)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    monkeypatch.setattr(os, "replace", replace)
+    target = tmp_path / "model.kes.json"
+    write_bytes(target, b"{}")
+    kinds = [e[0] for e in events]
+    assert kinds == ["fsync", "replace", "fsync"], events
+    if os.path.exists("/proc/self/fd"):  # Linux: check what was synced
+        assert events[0][1].startswith(str(tmp_path / ".model.kes.json.")) and events[0][1].endswith(".part")
+        assert events[2][1] == str(tmp_path)

@@ -2,7 +2,9 @@
 
 A crash or an error mid-write never leaves a half-written output behind: the target
 is either the old file or the complete new one (``os.replace`` is atomic on POSIX
-and Windows within one folder).
+and Windows within one folder).  The temporary file is fsynced before the rename and
+the folder after it, so after a power cut the target is never an empty or partial file
+that a later run would take as finished.
 
 Temporary files are named ``.<target name>.<pid>-<random>.part[<suffix>]``, hidden
 beside the target.  They are removed
@@ -25,7 +27,8 @@ import time
 from pathlib import Path
 from typing import Iterator
 
-__all__ = ["atomic_path", "write_text", "write_bytes", "remove_stale", "STALE_LEGACY_SECONDS"]
+__all__ = ["atomic_path", "write_text", "write_bytes", "remove_stale", "fsync_file", "fsync_dir",
+           "STALE_LEGACY_SECONDS"]
 
 #: Temporaries in the older naming (no process id: ``.<name>.<random>.part`` and the
 #: animation encoder's ``.<stem>.partial<ext>``) are removed once they are this old.
@@ -85,6 +88,33 @@ def remove_stale(path: str | os.PathLike) -> list[Path]:
     return removed
 
 
+def fsync_file(path: str | os.PathLike) -> None:
+    """Flush a file's data to the disk (``fsync``); errors (EIO, a full disk) propagate."""
+    fd = os.open(path, os.O_RDWR | getattr(os, "O_BINARY", 0))
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def fsync_dir(folder: str | os.PathLike) -> None:
+    """Flush a folder's entries (a rename into it) to the disk.
+
+    Best effort: platforms and file systems that cannot open or fsync a folder
+    (Windows, some network file systems) are skipped silently.
+    """
+    try:
+        fd = os.open(folder, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0))
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[Path]:
     """Yield a temporary path in the target's folder; rename it onto ``path`` on success.
@@ -119,7 +149,9 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp_path, 0o666 & ~umask)
+        fsync_file(tmp_path)  # the bytes are on disk before the name points at them
         os.replace(tmp_path, path)
+        fsync_dir(path.parent)  # and the rename itself survives a power cut
     finally:
         with contextlib.suppress(FileNotFoundError):
             tmp_path.unlink()
