@@ -4,7 +4,10 @@ A CSV file (local path or fsspec URL) with columns
 
 ``id`` (required)
     The fabric's name; also its output folder ``OUT/<id>/``.  Letters, digits, ``.``,
-    ``_`` and ``-``; unique; not starting with ``.``.
+    ``_`` and ``-``; unique ignoring case (``A`` and ``a`` would share a folder on macOS
+    and Windows); not starting with ``.``.  An id equal to a file the run writes in
+    ``OUT`` (:data:`kesbrdf.batch.summary.OUTPUT_FILES`: ``summary.csv`` ..., ignoring
+    case) fails that fabric (:func:`check_id`).
 ``input`` (required)
     A measurement CSV (``# kesbrdf-measurement: 1``) or an acquisition manifest
     (``# kesbrdf-manifest: 1``, frames beside it), as a path relative to the
@@ -36,7 +39,7 @@ from dataclasses import dataclass, field
 
 from kesbrdf.errors import FormatError, where
 
-__all__ = ["Fabric", "read_catalog", "OPTION_COLUMNS", "DEFAULT_OPTIONS"]
+__all__ = ["Fabric", "read_catalog", "check_id", "OPTION_COLUMNS", "DEFAULT_OPTIONS"]
 
 #: Option column -> default (also the options a step's parameters are built from).
 DEFAULT_OPTIONS: dict = {
@@ -67,6 +70,22 @@ class Fabric:
     #: a one-line error found while reading the row (the fabric fails with it)
     error: str | None = None
     line: int | None = None
+
+
+def check_id(fid: str, source=None, line: int | None = None) -> str | None:
+    """The one-line error for a fabric id that names one of the run's own files in
+    ``OUT`` (compared ignoring case), else None.
+
+    >>> check_id("Summary.CSV", "cat.csv", 4)  # doctest: +ELLIPSIS
+    "cat.csv:4: expected a fabric id other than the batch's own files in OUT (summary.csv, ...), got 'Summary.CSV'"
+    """
+    from kesbrdf.batch.summary import OUTPUT_FILES
+
+    names = tuple(OUTPUT_FILES.values())
+    if fid.casefold() in {n.casefold() for n in names}:
+        return (f"{where(source, line)}expected a fabric id other than the batch's own files in OUT "
+                f"({', '.join(names)}; ignoring case), got {fid!r}")
+    return None
 
 
 def _join(base: str, rel: str) -> str:
@@ -145,11 +164,14 @@ def parse_catalog(text: str, source: str = "<catalog>") -> list[Fabric]:
             raise FormatError(
                 f"{where(source, lineno)}expected an id of letters, digits, '.', '_', '-' (a folder name), got {fid!r}"
             )
-        if fid in seen:
-            raise FormatError(f"{where(source, lineno)}duplicate id {fid!r} (first on line {seen[fid]})")
-        seen[fid] = lineno
+        first = seen.get(fid.casefold())
+        if first is not None:
+            as_ = "" if first[1] == fid else f" as {first[1]!r}; ids differing only in case share a folder on macOS and Windows"
+            raise FormatError(f"{where(source, lineno)}duplicate id {fid!r} (first on line {first[0]}{as_})")
+        seen[fid.casefold()] = (lineno, fid)
         fab = Fabric(id=fid, input=_join(source, rec["input"]) if rec["input"] else "", line=lineno)
-        if not rec["input"]:
+        fab.error = check_id(fid, source, lineno)
+        if not rec["input"] and fab.error is None:
             fab.error = f"{where(source, lineno)}fabric {fid!r}: expected an input path, got an empty cell"
         for name in OPTION_COLUMNS:
             text = rec.get(name, "")
@@ -176,9 +198,9 @@ def _folder_catalog(path: str, fs) -> list[Fabric]:
         else:
             continue
         fid = re.sub(r"[^A-Za-z0-9._-]", "_", fid).lstrip(".") or "fabric"
-        fabrics.append(Fabric(id=fid, input=inp))
-    ids = [f.id for f in fabrics]
-    dup = sorted({i for i in ids if ids.count(i) > 1})
+        fabrics.append(Fabric(id=fid, input=inp, error=check_id(fid, name)))
+    ids = [f.id.casefold() for f in fabrics]
+    dup = sorted({f.id for f in fabrics if ids.count(f.id.casefold()) > 1})
     if dup:
         raise FormatError(f"{where(path)}two inputs map to the same fabric id {dup[0]!r}; use a catalogue CSV")
     return fabrics

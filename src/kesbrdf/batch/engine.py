@@ -22,12 +22,14 @@ asks for ``resources={"render": 1}``.  Retries are counted per fabric by this dr
 a fabric whose step raised anything but a fabric error, or whose task's workers kept
 dying (``KilledWorker``, after Dask's own rescheduling), is resubmitted alone up to
 ``retries`` times.  Every retry is cheap and safe because finished steps are skipped
-by their manifests.
+by their manifests.  Each step runs in a step process killed after ``task_timeout``
+seconds (:mod:`kesbrdf.batch.isolation`): a hung step fails its fabric, never the run.
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import importlib.util
 import logging
 import os
@@ -36,8 +38,8 @@ import time
 import uuid
 from dataclasses import dataclass, field
 
-from kesbrdf.batch.catalog import Fabric, read_catalog
-from kesbrdf.batch.runner import run_chunk
+from kesbrdf.batch.catalog import Fabric, check_id, read_catalog
+from kesbrdf.batch.runner import DEFAULT_TASK_TIMEOUT, run_chunk
 from kesbrdf.batch.steps import RENDER_STEPS, closure
 from kesbrdf.batch.store import Store
 
@@ -196,7 +198,8 @@ def _preview_possible(rec: dict) -> bool:
 def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, scheduler=None, retries: int = 2,
               dashboard: bool | str = False, progress=None, storage_options: dict | None = None,
               settings: dict | None = None, worker_env_extra: dict | None = None,
-              write_summary: bool = True, chunk: int | None = None) -> BatchResult:
+              write_summary: bool = True, chunk: int | None = None,
+              task_timeout: float | None = DEFAULT_TASK_TIMEOUT) -> BatchResult:
     """Process every fabric of ``catalog`` into ``out`` (see the module docstring).
 
     Parameters
@@ -220,6 +223,11 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
         Batch-wide step settings, e.g. ``{"preview": {"spp": 8}}``.
     chunk : int, optional
         Fabrics per core task (default :func:`auto_chunk`); renders are one per task.
+    task_timeout : float, optional
+        Seconds one step of one fabric may run (default
+        :data:`~kesbrdf.batch.runner.DEFAULT_TASK_TIMEOUT`); a step past it is killed
+        and the fabric fails with the reason.  None or 0: no limit, and the steps run
+        in the worker (or this) process itself.
 
     Returns
     -------
@@ -228,7 +236,10 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
     t0 = time.perf_counter()
     steps = tuple(steps)
     all_steps = closure(steps)
-    fabrics = list(catalog) if isinstance(catalog, (list, tuple)) else read_catalog(catalog, storage_options)
+    if isinstance(catalog, (list, tuple)):  # Fabric objects from Python: the id check of a catalogue file
+        fabrics = [dataclasses.replace(f, error=f.error or check_id(f.id)) for f in catalog]
+    else:
+        fabrics = read_catalog(catalog, storage_options)
     store = Store(out, storage_options)
     settings = dict(settings or {})
     core_steps = tuple(s for s in all_steps if s not in RENDER_STEPS)
@@ -251,7 +262,7 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
             progress({"event": "start", "total": len(fabrics), "dashboard": None, "workers": 0})
         for fab in fabrics:
             for attempt in range(1, retries + 2):
-                rec = run_chunk([fab], store.url, storage_options, all_steps, settings)[0]
+                rec = run_chunk([fab], store.url, storage_options, all_steps, settings, task_timeout)[0]
                 if rec["status"] != "transient":
                     break
             if rec["status"] == "transient":
@@ -261,8 +272,8 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
     else:
         n_workers, dash_link = _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render,
                                          settings, workers, scheduler, retries, dashboard, worker_env_extra,
-                                         progress, finish, notes, chunk)
-    store.sweep([f.id for f in fabrics])
+                                         progress, finish, notes, chunk, task_timeout)
+    store.sweep([f.id for f in fabrics if not f.error])
     ordered = [records[f.id] for f in fabrics]
     result = BatchResult(out=store.display(), records=ordered, counts=counts, seconds=time.perf_counter() - t0,
                          notes=notes, dashboard=dash_link, workers=n_workers)
@@ -274,7 +285,7 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
 
 
 def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render, settings, workers, scheduler,
-              retries, dashboard, env_extra, progress, finish, notes, chunk):
+              retries, dashboard, env_extra, progress, finish, notes, chunk, task_timeout):
     from distributed import Client, KilledWorker, as_completed
 
     cluster = None
@@ -315,8 +326,8 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
             key = f"kesbrdf-{kind}-{group[0].id}-{token}-{counter[0]}"
             steps = core_steps if kind == "core" else render_steps
             extra = {} if kind == "core" else {"resources": {"render": 1}}
-            fut = client.submit(run_chunk, list(group), store.url, storage_options, steps, settings, key=key,
-                                pure=False, **extra)
+            fut = client.submit(run_chunk, list(group), store.url, storage_options, steps, settings, task_timeout,
+                                key=key, pure=False, **extra)
             by_key[fut.key] = (list(group), kind)
             ac.add(fut)
 

@@ -2,17 +2,25 @@
 
 :func:`run_fabric` walks the fabric's steps in pipeline order.  For each step it
 computes the key (input hashes + parameters + versions, :mod:`kesbrdf.batch.manifest`);
-when ``OUT/<fabric>/<step>/manifest.json`` has that key the step is *skipped* and its
-stored result reused; otherwise it computes the step in a scratch folder, writes the
-manifest last, and commits the folder in one rename.
+when ``OUT/<fabric>/<step>/manifest.json`` has that key **and every output it lists
+still has its recorded sha256** the step is *skipped* and its stored result reused;
+otherwise (a missing, emptied or altered output) it computes the step in a scratch
+folder, writes the manifest last, and commits the folder in one rename.
+
+Every step function (and the hashing of the catalogue input) runs in a step process
+(:mod:`~kesbrdf.batch.isolation`) that is killed when it runs longer than
+``task_timeout`` seconds; the step then fails with a one-line reason.  Inputs that
+are not regular files (a FIFO, a device, a folder) are refused before they are opened
+(:func:`kesbrdf.io.files.open_regular`).
 
 Errors:
 
-* :class:`~kesbrdf.errors.KesbrdfError` and missing/unreadable input files are the
-  fabric's fault: the step is recorded ``failed`` with the one-line message, the steps
+* :class:`~kesbrdf.errors.KesbrdfError` (a timeout included) and missing/unreadable
+  input files are the fabric's fault: the step is recorded ``failed`` with the one-line message, the steps
   that need it are ``blocked``, the others still run, and nothing is retried.
-* Anything else (a crashed library, a full disk, a killed worker) propagates, so the
-  scheduler retries the task; finished steps are skipped on the retry.
+* Anything else (a crashed library, a crashed step process, a full disk, a killed
+  worker) propagates, so the scheduler retries the task; finished steps are skipped on
+  the retry.
 """
 
 from __future__ import annotations
@@ -25,24 +33,32 @@ import tempfile
 import time
 from pathlib import Path
 
+from kesbrdf.batch import isolation
 from kesbrdf.batch import manifest as mf
 from kesbrdf.batch.catalog import DEFAULT_OPTIONS, Fabric
 from kesbrdf.batch.steps import DEPENDS, STEP_FUNCTIONS, closure, input_files, step_params
 from kesbrdf.batch.store import Store, is_url
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.io.files import open_regular
 
-__all__ = ["run_fabric", "run_chunk", "PERMANENT_ERRORS", "TEST_HOOKS_ENV"]
+__all__ = ["run_fabric", "run_chunk", "PERMANENT_ERRORS", "TEST_HOOKS_ENV", "DEFAULT_TASK_TIMEOUT"]
 
 #: Exceptions that are the input's fault: reported, never retried.
 PERMANENT_ERRORS = (KesbrdfError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
                     ImportError)
 #: Test-only hook file (JSON); see :func:`_test_hooks`.
 TEST_HOOKS_ENV = "KESBRDF_BATCH_TEST_HOOKS"
+#: Longest a step of one fabric may run, in seconds (``--task-timeout``).  The slowest
+#: step measured is an export with every RGL format, ~30 s wall on a loaded 2-core
+#: machine (docs/batch.md "Performance"); 10 minutes is 20 times that, and bounds the
+#: time a hung step holds a worker.
+DEFAULT_TASK_TIMEOUT = 600.0
 
 
 def _sha256_file(path: Path) -> str:
+    """sha256 of a regular file (a FIFO, device or folder is refused, never opened)."""
     h = hashlib.sha256()
-    with open(path, "rb") as fh:
+    with open_regular(path) as fh:
         for chunk in iter(lambda: fh.read(1 << 20), b""):
             h.update(chunk)
     return h.hexdigest()
@@ -58,7 +74,7 @@ def _test_hooks(step: str, fabric: str) -> None:
     """Test-only fault injection, active only when ``$KESBRDF_BATCH_TEST_HOOKS`` names a JSON file.
 
     ``{"sleep": {"steps": [...], "seconds": s}}`` slows steps down (to kill things
-    mid-run); ``{"fail_once": {"steps": [...], "fabrics": [...], "record": DIR}}``
+    mid-run, or to make them time out; the sleep runs in the step process); ``{"fail_once": {"steps": [...], "fabrics": [...], "record": DIR}}``
     raises a transient ``RuntimeError`` on the first attempt of each (fabric, step)
     and records every attempt as a file in DIR.
     """
@@ -121,11 +137,15 @@ class _Input:
         return self._path
 
 
-def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = None) -> dict:
+def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = None,
+               task_timeout: float | None = DEFAULT_TASK_TIMEOUT) -> dict:
     """Run (or skip) ``steps`` and what they need for one fabric; returns its record.
 
     The record: ``{"id", "status": ok|failed, "error", "failed_step", "steps":
     {step: {"status": done|skipped|failed|blocked, "seconds", "result", "outputs"}}}``.
+    A step found in the store whose outputs no longer match their manifest has
+    ``"stale"``: why it was recomputed.  ``task_timeout`` (seconds; None or 0: none, and
+    the steps run in this process) bounds each step (:mod:`~kesbrdf.batch.isolation`).
     """
     store = out if isinstance(out, Store) else Store(out)
     settings = settings or {}
@@ -140,7 +160,7 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
     src = _Input(fabric)
     cache = None if store.local else tempfile.mkdtemp(prefix="kesbrdf-batch-cache-")
     try:
-        _run_steps(fabric, store, steps, settings, options, vers, src, cache, record)
+        _run_steps(fabric, store, steps, settings, options, vers, src, cache, record, task_timeout)
     finally:
         if cache:
             shutil.rmtree(cache, ignore_errors=True)
@@ -149,8 +169,37 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
     return record
 
 
-def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record) -> None:
+def _ingest_inputs(path: Path) -> tuple[list[Path], dict]:
+    """The files the ingest step reads (the input, a manifest's frames) and their sha256."""
+    files = input_files(path)
+    base = files[0].parent
+    return files, {"input/" + p.relative_to(base).as_posix() if p.is_relative_to(base) else str(p):
+                   _sha256_file(p) for p in files}
+
+
+def _call_step(step: str, fabric_id: str, inputs: dict, params: dict, scratch: Path) -> dict:
+    """One step function (what the step process runs)."""
+    _test_hooks(step, fabric_id)
+    return STEP_FUNCTIONS[step](inputs, params, scratch)
+
+
+def _stale(store: Store, fabric_id: str, step: str, outputs: dict) -> str | None:
+    """Why a committed step's files do not match its manifest (None when they all do)."""
+    for name, digest in outputs.items():
+        try:
+            got = store.sha256(fabric_id, step, name)
+        except (OSError, KesbrdfError) as exc:  # e.g. replaced by a FIFO or a folder
+            return f"{name}: {_one_line(exc)}"
+        if got is None:
+            return f"{name}: missing"
+        if got != digest:
+            return f"{name}: content differs from its manifest (sha256 {got[:12]}…, expected {digest[:12]}…)"
+    return None
+
+
+def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record, task_timeout) -> None:
     manifests: dict[str, dict] = {}
+    env = {TEST_HOOKS_ENV: os.environ.get(TEST_HOOKS_ENV)}
     for step in closure(steps):
         t0 = time.perf_counter()
         entry = {"status": None, "seconds": 0.0, "result": {}, "outputs": {}}
@@ -158,13 +207,12 @@ def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record
         if any(record["steps"].get(d, {}).get("status") in ("failed", "blocked") for d in DEPENDS[step]):
             entry["status"] = "blocked"
             continue
+        what = f"{fabric.id}: step {step}"
         try:
             params = step_params(step, options, settings)
             if step == "ingest":
-                files = input_files(src.path())
-                base = files[0].parent
-                inputs = {"input/" + p.relative_to(base).as_posix() if p.is_relative_to(base) else str(p):
-                          _sha256_file(p) for p in files}
+                files, inputs = isolation.run(_ingest_inputs, (src.path(),), task_timeout, env,
+                                              what=f"{what} (reading the input)")
                 local_inputs = {"input": files[0]}
             else:
                 inputs, local_inputs = {}, {"source": _source_name(fabric)}
@@ -176,16 +224,19 @@ def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record
             key = mf.step_key(step, inputs, params, vers)
             old = mf.parse_manifest(store.read_bytes(fabric.id, step, mf.MANIFEST))
             if old is not None and old.get("key") == key:
-                manifests[step] = old
-                entry.update(status="skipped", result=old.get("result", {}), outputs=old.get("outputs", {}),
-                             computed_seconds=old.get("seconds"))
-                entry["seconds"] = time.perf_counter() - t0
-                continue
-            _test_hooks(step, fabric.id)
+                why = _stale(store, fabric.id, step, old.get("outputs") or {})
+                if why is None:
+                    manifests[step] = old
+                    entry.update(status="skipped", result=old.get("result", {}), outputs=old.get("outputs", {}),
+                                 computed_seconds=old.get("seconds"))
+                    entry["seconds"] = time.perf_counter() - t0
+                    continue
+                entry["stale"] = why
             scratch = store.scratch(fabric.id, step)
             try:
                 t1 = time.perf_counter()
-                result = STEP_FUNCTIONS[step](local_inputs, params, scratch)
+                result = isolation.run(_call_step, (step, fabric.id, local_inputs, params, scratch), task_timeout,
+                                       env, what=what)
                 seconds = time.perf_counter() - t1
                 outputs = {p.relative_to(scratch).as_posix(): _sha256_file(p)
                            for p in sorted(scratch.rglob("*")) if p.is_file()}
@@ -223,7 +274,8 @@ def _store(url: str, storage_options: dict | None) -> Store:
     return _STORES[key]
 
 
-def run_chunk(fabrics, url: str, storage_options: dict | None, steps, settings: dict | None = None) -> list[dict]:
+def run_chunk(fabrics, url: str, storage_options: dict | None, steps, settings: dict | None = None,
+              task_timeout: float | None = DEFAULT_TASK_TIMEOUT) -> list[dict]:
     """:func:`run_fabric` for several fabrics (one Dask task amortises its overhead).
 
     A transient exception of one fabric does not stop the others: its record gets
@@ -234,7 +286,7 @@ def run_chunk(fabrics, url: str, storage_options: dict | None, steps, settings: 
     out = []
     for fab in fabrics:
         try:
-            out.append(run_fabric(fab, store, steps, settings))
+            out.append(run_fabric(fab, store, steps, settings, task_timeout))
         except Exception as exc:  # anything but a fabric error: retried by the driver
             out.append({"id": fab.id, "input": fab.input, "status": "transient",
                         "failed_step": getattr(exc, "kesbrdf_step", None),

@@ -151,7 +151,9 @@ def _write_json(path: Path, doc) -> None:
 
 
 def is_manifest(path: Path) -> bool:
-    with open(path, "rb") as fh:
+    from kesbrdf.io.files import open_regular
+
+    with open_regular(path) as fh:  # a FIFO or a device is refused, never read
         head = fh.read(256).decode("utf-8", "replace").lstrip("\ufeff").lstrip()
     return head.startswith("# kesbrdf-manifest")
 
@@ -168,9 +170,9 @@ def input_files(path: Path) -> list[Path]:
 
 # -- the steps ------------------------------------------------------------------------
 def step_ingest(inputs: dict, params: dict, out: Path) -> dict:
+    from kesbrdf.io.files import read_regular
+
     src = Path(inputs["input"])
-    if not src.is_file():
-        raise FileNotFoundError(2, "No such file or directory", str(src))
     if is_manifest(src):
         from kesbrdf.acquisition.ingest import ingest
         from kesbrdf.io.measurement_csv import write_measurement
@@ -183,7 +185,7 @@ def step_ingest(inputs: dict, params: dict, out: Path) -> dict:
         return {"source": "manifest", "n_samples": len(res.measurement), "frames": counts}
     from kesbrdf.io.measurement_csv import parse_measurement
 
-    data = src.read_bytes()
+    data = read_regular(src)
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError:
@@ -284,7 +286,7 @@ def step_export(inputs: dict, params: dict, out: Path) -> dict:
         drjit_threads()  # some writers build Mitsuba warps
     done, failed, seconds = {}, {}, {}
     for fmt in params["formats"]:
-        name = ex.FORMATS[fmt]
+        name = params["modules"][fmt]  # as resolved when the key was made (not this process's registry)
         t0 = time.perf_counter()
         try:  # a format whose optional dependency is missing fails alone
             module = importlib.import_module(name if "." in name else f"kesbrdf.export.{name}")
@@ -293,7 +295,17 @@ def step_export(inputs: dict, params: dict, out: Path) -> dict:
             (out / fmt).mkdir()
             target = out / fmt / f"model{exts[0]}"
             if hasattr(ex, "export"):
-                res = ex.export(model, fmt, target)
+                # the framework looks formats up by name: lend it the module the step's key
+                # names (a step process, or a Dask worker, may not share the caller's registry)
+                before = ex.FORMATS.get(fmt)
+                ex.FORMATS[fmt] = name
+                try:
+                    res = ex.export(model, fmt, target)
+                finally:
+                    if before is None:
+                        ex.FORMATS.pop(fmt, None)
+                    else:
+                        ex.FORMATS[fmt] = before
             else:  # before the export framework lands: call the format module directly
                 res = module.export(model, target)
         except (KesbrdfError, ImportError) as exc:

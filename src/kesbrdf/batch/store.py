@@ -4,8 +4,10 @@
 storage options).  A step is computed in a *local* scratch folder and then committed:
 
 * local file systems: the scratch folder is created next to its target,
-  ``OUT/<fabric>/.tmp-<step>-<uuid>``, and renamed onto ``OUT/<fabric>/<step>`` (one
-  ``rename``: the step folder appears complete or not at all);
+  ``OUT/<fabric>/.tmp-<step>-<uuid>``, its files and folders are fsynced, and it is
+  renamed onto ``OUT/<fabric>/<step>`` (one ``rename``: the step folder appears
+  complete or not at all), then ``OUT/<fabric>`` is fsynced (the rename survives a
+  power cut, and a committed folder never holds files whose data was not yet written);
 * object stores (no rename): the files are uploaded first and ``manifest.json`` last,
   after any stale manifest was deleted.  A folder without a matching manifest counts
   as absent, so the manifest is the commit marker.
@@ -13,11 +15,14 @@ storage options).  A step is computed in a *local* scratch folder and then commi
 
 from __future__ import annotations
 
+import hashlib
 import os
 import shutil
 import tempfile
 import uuid
 from pathlib import Path
+
+from kesbrdf._atomic import fsync_dir, fsync_file
 
 __all__ = ["Store", "is_url", "TMP_PREFIX"]
 
@@ -64,6 +69,27 @@ class Store:
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
             return None
 
+    def sha256(self, *parts: str) -> str | None:
+        """sha256 of a stored file's bytes, or None when it is missing.
+
+        Raises :class:`~kesbrdf.errors.FormatError` when a local path is not a regular
+        file (a FIFO is refused, never opened).
+        """
+        h = hashlib.sha256()
+        try:
+            if self.local:
+                from kesbrdf.io.files import open_regular
+
+                fh = open_regular(self.path(*parts))
+            else:
+                fh = self.fs.open(self.path(*parts), "rb")
+            with fh:
+                for block in iter(lambda: fh.read(1 << 20), b""):
+                    h.update(block)
+        except (FileNotFoundError, NotADirectoryError):
+            return None
+        return h.hexdigest()
+
     def exists(self, *parts: str) -> bool:
         return self.fs.exists(self.path(*parts))
 
@@ -93,6 +119,7 @@ class Store:
         target = self.path(fabric, step)
         if self.local:
             os.chmod(scratch, 0o777 & ~_umask())
+            _fsync_tree(scratch)
             old = None
             if os.path.lexists(target):
                 old = self.path(fabric, f"{OLD_PREFIX}{step}-{uuid.uuid4().hex[:8]}")
@@ -108,6 +135,7 @@ class Store:
             finally:
                 if old:
                     shutil.rmtree(old, ignore_errors=True)
+            fsync_dir(self.path(fabric))
             return True
         try:
             self.fs.rm(self.path(fabric, step, manifest_name))
@@ -148,6 +176,18 @@ class Store:
                     shutil.rmtree(p, ignore_errors=True)
                     n += 1
         return n
+
+
+def _fsync_tree(folder: Path) -> None:
+    """fsync every file below ``folder``, then every folder, deepest first."""
+    dirs = [folder]
+    for p in sorted(folder.rglob("*")):
+        if p.is_dir() and not p.is_symlink():
+            dirs.append(p)
+        elif p.is_file() and not p.is_symlink():
+            fsync_file(p)
+    for d in reversed(dirs):
+        fsync_dir(d)
 
 
 def _umask() -> int:

@@ -24,7 +24,12 @@ import html
 import io
 import json
 
-__all__ = ["summary_rows", "write_summary", "COLUMNS"]
+__all__ = ["summary_rows", "write_summary", "COLUMNS", "OUTPUT_FILES"]
+
+#: Every file a run writes at the top of ``OUT`` (beside the fabric folders), by kind.
+#: The catalogue refuses fabric ids equal to these names, ignoring case
+#: (:func:`kesbrdf.batch.catalog.check_id`): ``OUT/<id>/`` would take their place.
+OUTPUT_FILES = {"csv": "summary.csv", "parquet": "summary.parquet", "index": "index.html", "json": "summary.json"}
 
 COLUMNS = ("id", "input", "status", "error", "failed_step", "kind", "n_samples", "fit_nrmse", "loo_nrmse",
            "ref_nrmse", "fit_error", "seconds", "steps_done", "steps_skipped", "model", "report", "preview",
@@ -168,7 +173,8 @@ def contact_sheet(rows, read_bytes, title="kesbrdf batch") -> str:
         f"<style>{_CSS}</style></head><body><h1>{html.escape(title)}</h1>"
         f"<p>{len(rows)} fabrics, {n_ok} ok, {len(rows) - n_ok} failed. Fit error: worst leave-one-orientation-out "
         "relative RMSE (else the round trip); ref: held-out orientations against the fabric's reference. "
-        "Table: <a href='summary.csv'>summary.csv</a>, <a href='summary.parquet'>summary.parquet</a>.</p>"
+        f"Table: <a href='{OUTPUT_FILES['csv']}'>{OUTPUT_FILES['csv']}</a>, "
+        f"<a href='{OUTPUT_FILES['parquet']}'>{OUTPUT_FILES['parquet']}</a>.</p>"
         "<p>sort by <select id='key'><option value='fiterror'>fit error</option><option value='refnrmse'>reference "
         "error</option><option value='loonrmse'>leave-one-out error</option><option value='fitnrmse'>round trip"
         "</option><option value='id'>id</option><option value='status'>status</option><option value='seconds'>time"
@@ -183,12 +189,13 @@ def write_summary(store, records, steps, meta_by_id=None) -> dict:
     """Write the three summary files into the store's root; returns their locations."""
     rows = summary_rows(records, steps, meta_by_id)
     cols = _columns(rows, steps)
-    paths = {"csv": store.write_bytes("summary.csv", to_csv(rows, cols).encode())}
+    name = OUTPUT_FILES
+    paths = {"csv": store.write_bytes(name["csv"], to_csv(rows, cols).encode())}
     try:
-        paths["parquet"] = store.write_bytes("summary.parquet", to_parquet(rows, cols))
+        paths["parquet"] = store.write_bytes(name["parquet"], to_parquet(rows, cols))
     except ImportError:  # pragma: no cover - pyarrow is in the batch extra
         paths["parquet"] = None
     sheet = contact_sheet(rows, lambda rel: store.read_bytes(rel))
-    paths["index"] = store.write_bytes("index.html", sheet.encode())
-    paths["json"] = store.write_bytes("summary.json", (json.dumps(rows, indent=1, default=str) + "\n").encode())
+    paths["index"] = store.write_bytes(name["index"], sheet.encode())
+    paths["json"] = store.write_bytes(name["json"], (json.dumps(rows, indent=1, default=str) + "\n").encode())
     return paths

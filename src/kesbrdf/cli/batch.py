@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 
 from kesbrdf.cli._common import stderr
@@ -23,6 +24,9 @@ def add_arguments(p):
     p.add_argument("--preview-spp", type=int, default=None, help="samples per pixel of the preview tile")
     p.add_argument("--export-formats", default=None, metavar="A,B",
                    help="export only these formats (default: every format in kesbrdf.export.FORMATS)")
+    p.add_argument("--task-timeout", type=float, default=None, metavar="SECONDS",
+                   help="longest one step of one fabric may run before it is killed and the fabric fails "
+                        "(default 600; 0: no limit, steps run inside the worker)")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
@@ -70,6 +74,11 @@ def run(args) -> int:
         raise KesbrdfError(f"--workers: expected a count >= 0, got {args.workers}")
     if args.retries < 0:
         raise KesbrdfError(f"--retries: expected a count >= 0, got {args.retries}")
+    from kesbrdf.batch.runner import DEFAULT_TASK_TIMEOUT
+
+    timeout = DEFAULT_TASK_TIMEOUT if args.task_timeout is None else args.task_timeout
+    if not (timeout >= 0 and math.isfinite(timeout)):
+        raise KesbrdfError(f"--task-timeout: expected seconds >= 0 (0: no limit), got {args.task_timeout}")
     dashboard = args.dashboard
     if isinstance(dashboard, str):
         if not dashboard.isdigit():
@@ -94,7 +103,8 @@ def run(args) -> int:
     bar = _Bar(not args.no_progress)
     try:
         result = run_batch(args.catalog, args.output, steps=steps, workers=args.workers, scheduler=args.scheduler,
-                           retries=args.retries, dashboard=dashboard, progress=bar, settings=settings)
+                           retries=args.retries, dashboard=dashboard, progress=bar, settings=settings,
+                           task_timeout=timeout)
     finally:
         bar.close()
     c = result.counts
