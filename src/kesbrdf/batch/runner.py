@@ -74,7 +74,9 @@ def _test_hooks(step: str, fabric: str) -> None:
     """Test-only fault injection, active only when ``$KESBRDF_BATCH_TEST_HOOKS`` names a JSON file.
 
     ``{"sleep": {"steps": [...], "seconds": s}}`` slows steps down (to kill things
-    mid-run, or to make them time out; the sleep runs in the step process); ``{"fail_once": {"steps": [...], "fabrics": [...], "record": DIR}}``
+    mid-run, or to make them time out; the sleep runs in the step process), only of
+    ``"fabrics": [...]`` when given, and records ``<fabric>.<step>.<pid>`` in
+    ``"record": DIR`` when given (the process to check that a timeout killed); ``{"fail_once": {"steps": [...], "fabrics": [...], "record": DIR}}``
     raises a transient ``RuntimeError`` on the first attempt of each (fabric, step)
     and records every attempt as a file in DIR.
     """
@@ -83,7 +85,11 @@ def _test_hooks(step: str, fabric: str) -> None:
         return
     hooks = json.loads(Path(path).read_text())
     sleep = hooks.get("sleep")
-    if sleep and step in sleep.get("steps", ()):
+    if sleep and step in sleep.get("steps", ()) and fabric in sleep.get("fabrics", (fabric,)):
+        if sleep.get("record"):
+            record = Path(sleep["record"])
+            record.mkdir(parents=True, exist_ok=True)
+            (record / f"{fabric}.{step}.{os.getpid()}").write_text("sleeping\n")
         time.sleep(float(sleep["seconds"]))
     fail = hooks.get("fail_once")
     if fail and step in fail.get("steps", ()) and fabric in fail.get("fabrics", ()):
