@@ -90,7 +90,8 @@ def remove_stale(path: str | os.PathLike) -> list[Path]:
 
 def fsync_file(path: str | os.PathLike) -> None:
     """Flush a file's data to the disk (``fsync``); errors (EIO, a full disk) propagate."""
-    fd = os.open(path, os.O_RDWR | getattr(os, "O_BINARY", 0))
+    # POSIX fsyncs through any descriptor (so read-only files work too); Windows needs write access
+    fd = os.open(path, (os.O_RDONLY if os.name == "posix" else os.O_RDWR) | getattr(os, "O_BINARY", 0))
     try:
         os.fsync(fd)
     finally:

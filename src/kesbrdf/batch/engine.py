@@ -273,7 +273,7 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
         n_workers, dash_link = _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render,
                                          settings, workers, scheduler, retries, dashboard, worker_env_extra,
                                          progress, finish, notes, chunk, task_timeout)
-    store.sweep([f.id for f in fabrics if not f.error])
+    store.sweep([f.id for f in fabrics])
     ordered = [records[f.id] for f in fabrics]
     result = BatchResult(out=store.display(), records=ordered, counts=counts, seconds=time.perf_counter() - t0,
                          notes=notes, dashboard=dash_link, workers=n_workers)

@@ -24,7 +24,7 @@ round trip over a pipe (well under a millisecond); starting a step process costs
 interpreter start plus the imports of the first step (about a second), once.
 
 ``timeout`` of ``None`` or 0 runs ``fn`` in the caller, without a child (no timeout;
-handy under a debugger).
+handy under a debugger); so does any platform that is not POSIX (Windows).
 """
 
 from __future__ import annotations
@@ -167,7 +167,7 @@ def run(fn, args: tuple = (), timeout: float | None = None, env: dict | None = N
     reused, so it does not see later changes of this process's environment).  With
     ``timeout`` None or 0, ``fn`` runs here, in the caller.
     """
-    if not timeout:
+    if not timeout or os.name != "posix":  # pass_fds, process groups and SIGKILL are POSIX
         return fn(*args)
     return _mine().call(fn, args, float(timeout), env, what)
 
