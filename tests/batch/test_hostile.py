@@ -215,3 +215,16 @@ def test_a_step_folder_is_fsynced_before_its_rename(tmp_path, monkeypatch):
     assert {str(scratch / n) for n in ("model.kes.json", "sub/x.bin", "manifest.json", "sub")} | {str(scratch)} \
         <= synced_before
     assert ("fsync", store.path("fab")) in events[k + 1:]  # the rename itself
+
+
+def test_cli_task_timeout_flag(library, tmp_path, capsys):
+    from kesbrdf.cli.main import main
+
+    cat = _hostile_catalog(library, tmp_path)
+    assert main(["batch", str(cat), "-o", str(tmp_path / "x"), "--task-timeout", "-1"]) == 2
+    assert "--task-timeout: expected seconds >= 0 (0: no limit), got -1.0" in capsys.readouterr().err
+    code = _finishes(main, ["batch", str(cat), "-o", str(tmp_path / "cli"), "--workers", "0", "--steps", "fit",
+                            "--task-timeout", "30", "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 0 and "2 done, 0 skipped (up to date), 2 failed of 4" in err
+    assert f"failed fifo (ingest): {tmp_path / 'pipe.csv'}: expected a regular file, got a named pipe (FIFO)" in err
