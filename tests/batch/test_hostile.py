@@ -99,7 +99,8 @@ def test_fifo_tampered_outputs_and_clashing_id_finish_with_a_summary(library, tm
     assert st["good-a"]["fit"]["status"] == "done" and st["good-a"]["fit"]["stale"].startswith(
         "model.kes.json: content differs from its manifest")
     assert st["good-a"]["ingest"]["status"] == "skipped" and st["good-a"]["validate"]["status"] == "skipped"
-    assert st["good-b"]["validate"]["status"] == "done" and st["good-b"]["validate"]["stale"] == "validation.json: missing"
+    assert st["good-b"]["validate"]["status"] == "done"
+    assert st["good-b"]["validate"]["stale"] == "validation.json: missing"
     assert st["good-b"]["ingest"]["status"] == "done"  # the altered measurement is rewritten from the input
     assert st["good-b"]["fit"]["status"] == "skipped"  # same bytes again: its input hash did not change
     assert second.counts == {"done": 2, "failed": 2, "skipped": 0, "total": 4}

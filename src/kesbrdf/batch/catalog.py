@@ -166,7 +166,8 @@ def parse_catalog(text: str, source: str = "<catalog>") -> list[Fabric]:
             )
         first = seen.get(fid.casefold())
         if first is not None:
-            as_ = "" if first[1] == fid else f" as {first[1]!r}; ids differing only in case share a folder on macOS and Windows"
+            as_ = "" if first[1] == fid else (f" as {first[1]!r}; ids differing only in case share a folder "
+                                              "on macOS and Windows")
             raise FormatError(f"{where(source, lineno)}duplicate id {fid!r} (first on line {first[0]}{as_})")
         seen[fid.casefold()] = (lineno, fid)
         fab = Fabric(id=fid, input=_join(source, rec["input"]) if rec["input"] else "", line=lineno)

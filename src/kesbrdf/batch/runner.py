@@ -76,8 +76,8 @@ def _test_hooks(step: str, fabric: str) -> None:
     ``{"sleep": {"steps": [...], "seconds": s}}`` slows steps down (to kill things
     mid-run, or to make them time out; the sleep runs in the step process), only of
     ``"fabrics": [...]`` when given, and records ``<fabric>.<step>.<pid>`` in
-    ``"record": DIR`` when given (the process to check that a timeout killed); ``{"fail_once": {"steps": [...], "fabrics": [...], "record": DIR}}``
-    raises a transient ``RuntimeError`` on the first attempt of each (fabric, step)
+    ``"record": DIR`` when given (the process to check that a timeout killed);
+    ``{"fail_once": {"steps": [...], "fabrics": [...], "record": DIR}}`` raises a transient ``RuntimeError`` on the first attempt of each (fabric, step)
     and records every attempt as a file in DIR.
     """
     path = os.environ.get(TEST_HOOKS_ENV)
