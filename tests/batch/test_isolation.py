@@ -65,3 +65,14 @@ def test_a_hang_is_killed_at_the_deadline_and_a_crash_is_transient(tmp_path):
         isolation.run(os._exit, (3,), LIMIT_S)
     assert not isinstance(isolation.StepProcessDied("x"), KesbrdfError)  # retried by the batch
     assert isolation.run(sum, ([1, 2],), LIMIT_S) == 3  # a fresh step process
+
+
+def test_the_step_process_follows_the_callers_folder_and_path(tmp_path, monkeypatch):
+    isolation.run(os.getcwd, (), LIMIT_S)  # started elsewhere
+    monkeypatch.chdir(tmp_path)
+    assert isolation.run(os.getcwd, (), LIMIT_S) == str(tmp_path)  # a relative input means the same file
+    monkeypatch.syspath_prepend(str(tmp_path))
+    (tmp_path / "kesbrdf_isolation_probe.py").write_text("def f():\n    return 'found'\n")
+    import kesbrdf_isolation_probe
+
+    assert isolation.run(kesbrdf_isolation_probe.f, (), LIMIT_S) == "found"

@@ -96,7 +96,7 @@ class StepProcess:
             self.start()
         payload = pickle.dumps((fn, tuple(args)))  # fails here, in the caller, if it does not pickle
         try:
-            self._send.send((list(sys.path), dict(env or {})))
+            self._send.send((list(sys.path), os.getcwd(), dict(env or {})))
             self._send.send_bytes(payload)
         except OSError as exc:
             self.kill()
@@ -163,8 +163,9 @@ def _mine() -> StepProcess:
 def run(fn, args: tuple = (), timeout: float | None = None, env: dict | None = None, what: str = "the step"):
     """``fn(*args)`` in this thread's step process, killed after ``timeout`` seconds.
 
-    ``env`` variables are set in the step process before the call (the child is
-    reused, so it does not see later changes of this process's environment).  With
+    The step process takes this process's ``sys.path`` and working folder for the
+    call; ``env`` variables are set in it before the call (the child is reused, so it
+    does not see later changes of this process's environment otherwise).  With
     ``timeout`` None or 0, ``fn`` runs here, in the caller.
     """
     if not timeout or os.name != "posix":  # pass_fds, process groups and SIGKILL are POSIX
@@ -211,7 +212,7 @@ def _orphan_watch(ppid: int) -> None:
 
 
 def _serve(fd_in: int, fd_out: int) -> None:
-    """The child's loop: receive (sys.path, env, fn, args), answer (ok, value)."""
+    """The child's loop: receive (sys.path, cwd, env), then (fn, args); answer (ok, value)."""
     from multiprocessing.connection import Connection
 
     threading.Thread(target=_orphan_watch, args=(os.getppid(),), daemon=True).start()
@@ -219,7 +220,7 @@ def _serve(fd_in: int, fd_out: int) -> None:
     send = Connection(fd_out, readable=False)
     while True:
         try:
-            path, env = recv.recv()
+            path, cwd, env = recv.recv()
             payload = recv.recv_bytes()
         except (EOFError, OSError):
             return
@@ -228,6 +229,8 @@ def _serve(fd_in: int, fd_out: int) -> None:
             import importlib
 
             importlib.invalidate_caches()
+        if os.getcwd() != cwd:  # relative input paths mean what they mean in the caller
+            os.chdir(cwd)
         for k, v in env.items():
             if v is None:
                 os.environ.pop(k, None)
