@@ -52,6 +52,10 @@ class StepProcessDied(RuntimeError):
     """The step process died while running a step (a crash, not the step's input)."""
 
 
+#: Longest a step process may take to start (an interpreter and this module's imports;
+#: ~0.3 s idle, a few seconds on a loaded machine).  Not counted against a step's limit.
+STARTUP_LIMIT_S = 120.0
+
 _BOOT = ("import json, sys; sys.path[:] = json.loads(sys.argv[1]); "
          "from kesbrdf.batch.isolation import _serve; _serve(int(sys.argv[2]), int(sys.argv[3]))")
 
@@ -87,6 +91,14 @@ class StepProcess:
             os.close(from_child_w)
         self._send = Connection(to_child_w, readable=False)
         self._recv = Connection(from_child_r, writable=False)
+        try:  # wait for it to be up, so its start-up does not count against the first step
+            ready = self._recv.poll(STARTUP_LIMIT_S) and self._recv.recv() == "ready"
+        except (EOFError, OSError):
+            ready = False
+        if not ready:
+            code = self.kill()
+            raise StepProcessDied(f"the step process did not start within {STARTUP_LIMIT_S:g} s "
+                                  f"(exit status {code})")
 
     def call(self, fn, args: tuple, timeout: float, env: dict | None = None, what: str = "the step"):
         """``fn(*args)`` in the child; raises what it raised, or :class:`StepTimeout`
@@ -218,6 +230,7 @@ def _serve(fd_in: int, fd_out: int) -> None:
     threading.Thread(target=_orphan_watch, args=(os.getppid(),), daemon=True).start()
     recv = Connection(fd_in, writable=False)
     send = Connection(fd_out, readable=False)
+    send.send("ready")
     while True:
         try:
             path, cwd, env = recv.recv()
