@@ -94,11 +94,14 @@ def test_fifo_tampered_outputs_and_clashing_id_finish_with_a_summary(library, tm
     (out / "good-b" / "validate" / "validation.json").unlink()
     meas = out / "good-b" / "ingest" / "measurement.csv"
     meas.write_bytes(meas.read_bytes().replace(b"1", b"2", 1))
+    (out / "good-a" / "validate" / "manifest.json").unlink()
+    os.mkfifo(out / "good-a" / "validate" / "manifest.json")  # reading it would block
     second = _finishes(run_batch, str(cat), out, steps=STEPS, workers=0)
     st = {r["id"]: r["steps"] for r in second.records}
     assert st["good-a"]["fit"]["status"] == "done" and st["good-a"]["fit"]["stale"].startswith(
         "model.kes.json: content differs from its manifest")
-    assert st["good-a"]["ingest"]["status"] == "skipped" and st["good-a"]["validate"]["status"] == "skipped"
+    assert st["good-a"]["ingest"]["status"] == "skipped"
+    assert st["good-a"]["validate"]["status"] == "done"  # its manifest is a FIFO: not trusted, not read
     assert st["good-b"]["validate"]["status"] == "done"
     assert st["good-b"]["validate"]["stale"] == "validation.json: missing"
     assert st["good-b"]["ingest"]["status"] == "done"  # the altered measurement is rewritten from the input
@@ -228,6 +231,9 @@ def test_cli_task_timeout_flag(library, tmp_path, capsys):
     cat = _hostile_catalog(library, tmp_path)
     assert main(["batch", str(cat), "-o", str(tmp_path / "x"), "--task-timeout", "-1"]) == 2
     assert "--task-timeout: expected seconds >= 0 (0: no limit), got -1.0" in capsys.readouterr().err
+    # a catalogue that is a FIFO: one line, exit 2, no hang
+    assert _finishes(main, ["batch", str(tmp_path / "pipe.csv"), "-o", str(tmp_path / "y")]) == 2
+    assert f"{tmp_path / 'pipe.csv'}: expected a regular file, got a named pipe (FIFO)" in capsys.readouterr().err
     code = _finishes(main, ["batch", str(cat), "-o", str(tmp_path / "cli"), "--workers", "0", "--steps", "fit",
                             "--task-timeout", "30", "--no-progress"])
     err = capsys.readouterr().err

@@ -224,8 +224,13 @@ def read_catalog(source: str | os.PathLike, storage_options: dict | None = None)
         if not fabrics:
             raise FormatError(f"{where(source)}expected measurement CSVs or */manifest.csv in the folder, found none")
         return fabrics
-    with fs.open(path, "rb") as fh:
-        data = fh.read()
+    if "file" in (fs.protocol if isinstance(fs.protocol, tuple) else (fs.protocol,)):
+        from kesbrdf.io.files import read_regular
+
+        data = read_regular(path)  # a FIFO or a device is refused, never read
+    else:
+        with fs.open(path, "rb") as fh:
+            data = fh.read()
     try:
         text = data.decode("utf-8-sig")
     except UnicodeDecodeError:

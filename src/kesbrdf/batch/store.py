@@ -23,6 +23,7 @@ import uuid
 from pathlib import Path
 
 from kesbrdf._atomic import fsync_dir, fsync_file
+from kesbrdf.errors import KesbrdfError
 
 __all__ = ["Store", "is_url", "TMP_PREFIX"]
 
@@ -63,10 +64,17 @@ class Store:
 
     # -- reading -------------------------------------------------------------------
     def read_bytes(self, *parts: str) -> bytes | None:
+        """A stored file's bytes, or None when it is missing or (local) not a regular file."""
         try:
+            if self.local:
+                from kesbrdf.io.files import read_regular
+
+                return read_regular(self.path(*parts))  # a FIFO in OUT is refused, never read
             with self.fs.open(self.path(*parts), "rb") as fh:
                 return fh.read()
         except (FileNotFoundError, IsADirectoryError, NotADirectoryError):
+            return None
+        except KesbrdfError:  # a FIFO, a device, a folder: as good as absent (the step is recomputed)
             return None
 
     def sha256(self, *parts: str) -> str | None:
