@@ -38,8 +38,8 @@ _CHILD_THREADS = "1"
 def budget_message(name: str, limits: ViewerLimits) -> str:
     """The one-line refusal of a fit that ran out of its work budget."""
     return (
-        f"{name}: the fit did not finish within the viewer's work budget of {limits.fit_cpu_s:g} CPU-s "
-        f"and {limits.fit_wall_s:g} s (kesbrdf view --fit-cpu-s, --fit-wall-s); "
+        f"{name}: the fit did not finish within the viewer's work budget ({limits.fit_cpu_s:g} CPU-s, "
+        f"{limits.fit_wall_s:g} s wall-clock; kesbrdf view --fit-cpu-s, --fit-wall-s); "
         f"fit it with 'kesbrdf fit {name}' and open the model file"
     )
 
