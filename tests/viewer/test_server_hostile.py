@@ -247,3 +247,21 @@ def test_an_upload_over_the_rows_budget_of_its_kind_is_413_before_fitting(start)
     assert f"got {rows * 3} ({rows} rows x 3 channels)" in doc["error"]
     # no fit ran: parsing and choosing the kind take well under a second of the 10 CPU-s fit
     assert elapsed < FIT_BUDGET_S + 2.0, f"refused after {elapsed:.2f} s"
+
+
+def test_uploads_beyond_the_fit_slots_and_queue_get_503_at_once(start):
+    srv = start(fit_cpu_s=FIT_BUDGET_S, fit_wall_s=FIT_BUDGET_S, fit_workers=1, fit_queue=0)
+    costly = _scattered_csv(300)
+    first: dict = {}
+    worker = threading.Thread(target=lambda: first.update(answer=_post(srv, "/api/fit?name=a.csv", costly)))
+    worker.start()
+    try:
+        time.sleep(0.5)  # the first fit holds the only slot
+        t0 = time.monotonic()
+        status, doc = _post(srv, "/api/fit?name=b.csv", costly)
+        elapsed = time.monotonic() - t0
+    finally:
+        worker.join(WAIT_S)
+    assert status == 503 and doc["error"].startswith("b.csv: the viewer is busy: 1 fit(s) running")
+    assert elapsed < 1.0, f"refused after {elapsed:.2f} s"  # at once, not after the running fit
+    assert first["answer"][0] == 422
