@@ -1,8 +1,9 @@
 """A fit of an uploaded CSV in its own process, killed at its work budget.
 
-The server never parses or fits an upload itself: :class:`FitRunner` starts
-``python -m kesbrdf.viewer.fit_job`` with the CSV on stdin and reads one JSON answer
-from stdout.  The child limits its own CPU time (``RLIMIT_CPU`` = ``fit_cpu_s``; the
+The server never parses or fits an upload itself: :class:`FitRunner` hands the CSV to
+a ``python -m kesbrdf.viewer.fit_job`` process on stdin and reads one JSON answer from
+stdout.  Each process serves one upload; the next one is started ahead (its Python
+and the fit's modules loaded while it waits), so an upload does not wait for a start.  The child limits its own CPU time (``RLIMIT_CPU`` = ``fit_cpu_s``; the
 kernel stops it with SIGXCPU) and the parent kills it at ``fit_wall_s`` of wall-clock
 time, so one upload costs at most its budget whatever its content.  At most
 ``fit_workers`` fits run at once and ``fit_queue`` wait; further uploads get 503.
@@ -51,6 +52,7 @@ class FitRunner:
         self.limits = limits
         self._slots = asyncio.Semaphore(limits.fit_workers)
         self._waiting = 0
+        self._spare = None  # a started, warm fit process (a Task until it has started)
 
     async def fit(self, data: bytes, name: str, fallback: str | None) -> tuple[int, dict]:
         """``(status, document)`` for an upload (module docstring)."""
@@ -69,19 +71,59 @@ class FitRunner:
             return await self._run(data, name, fallback)
         finally:
             self._slots.release()
+            self.prepare()  # the next upload's process warms up once this fit is over
 
-    async def _run(self, data: bytes, name: str, fallback: str | None) -> tuple[int, dict]:
-        limits = self.limits
-        spec = json.dumps({"name": name, "fallback": fallback, "limits": limits.to_json()})
-        proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-m", "kesbrdf.viewer.fit_job", spec,
+    def prepare(self) -> None:
+        """Start a warm fit process (Python and the fit's imports loaded) unless one is ready.
+
+        Call from the event loop; the viewer does when its page is loaded and after
+        each fit, so an upload does not wait for a Python start.
+        """
+        if self._spare is None:
+            self._spare = asyncio.ensure_future(self._spawn(warm=True))
+
+    async def close(self) -> None:
+        """Stop the warm process, if any (server shutdown)."""
+        spare, self._spare = self._spare, None
+        if spare is None:
+            return
+        try:
+            proc = await spare
+        except OSError:
+            return
+        if proc.returncode is None:
+            proc.kill()
+            await proc.wait()
+
+    async def _spawn(self, warm: bool = False):
+        return await asyncio.create_subprocess_exec(
+            sys.executable, "-m", "kesbrdf.viewer.fit_job", json.dumps(self.limits.to_json()),
+            *(["--warm"] if warm else []),
             stdin=asyncio.subprocess.PIPE,
             stdout=asyncio.subprocess.PIPE,
             stderr=asyncio.subprocess.PIPE,
             env=_child_env(),
         )
+
+    async def _take(self):
+        """The warm process if it is alive, else a new one."""
+        spare, self._spare = self._spare, None
+        proc = None
+        if spare is not None:
+            try:
+                proc = await spare
+            except OSError:
+                proc = None
+        if proc is None or proc.returncode is not None:
+            proc = await self._spawn()
+        return proc
+
+    async def _run(self, data: bytes, name: str, fallback: str | None) -> tuple[int, dict]:
+        limits = self.limits
+        request = json.dumps({"name": name, "fallback": fallback}).encode() + b"\n"
+        proc = await self._take()
         try:
-            out, err = await asyncio.wait_for(proc.communicate(data), limits.fit_wall_s)
+            out, err = await asyncio.wait_for(proc.communicate(request + data), limits.fit_wall_s)
         except TimeoutError:
             return 422, {"error": budget_message(name, limits)}
         finally:
@@ -117,12 +159,11 @@ def _limit_cpu(seconds: float) -> None:
     resource.setrlimit(resource.RLIMIT_CPU, (soft, soft + 1))
 
 
-def _answer(spec: dict, data: bytes) -> dict:
+def _answer(limits: ViewerLimits, request: dict, data: bytes) -> dict:
     from kesbrdf.errors import KesbrdfError
     from kesbrdf.viewer.upload import UploadTooLarge, check_upload_work, fit_csv_bytes
 
-    limits = ViewerLimits(**spec["limits"])
-    name, fallback = spec["name"], spec["fallback"]
+    name, fallback = request["name"], request["fallback"]
     try:
         check_upload_work(data, name, limits)
         model, measurement = fit_csv_bytes(data, name, fallback)
@@ -141,16 +182,41 @@ def _answer(spec: dict, data: bytes) -> dict:
     return {"status": 200, "model": model, "measurement": measurement, "size": size}
 
 
+def _warm_up(limits: ViewerLimits) -> None:
+    """Load every module a fit uses, by fitting the built-in demo measurement (~50 ms)."""
+    try:
+        import scipy.optimize  # noqa: F401 - the scattered and prior fits
+    except ImportError:
+        pass
+    from kesbrdf.demo_data import embedded_measurement
+
+    _answer(limits, {"name": "warm-up.csv", "fallback": None}, embedded_measurement().read_bytes())
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Child entry point: ``python -m kesbrdf.viewer.fit_job SPEC_JSON < upload.csv``."""
-    spec = json.loads((argv or sys.argv[1:])[0])
-    _limit_cpu(float(spec["limits"]["fit_cpu_s"]))
+    """Child entry point: ``python -m kesbrdf.viewer.fit_job LIMITS_JSON [--warm]``.
+
+    Limits its CPU time, loads the fit's modules (``--warm``: a process started ahead of
+    its upload; otherwise they load as the fit needs them), then reads one request from stdin:
+    a JSON line ``{"name", "fallback"}`` followed by the CSV bytes; writes one JSON
+    answer to stdout.  An empty stdin (a warm process never used) exits at once.
+    """
+    args = argv if argv is not None else sys.argv[1:]
+    limits = ViewerLimits(**json.loads(args[0]))
+    _limit_cpu(limits.fit_cpu_s)
+    if "--warm" in args[1:]:  # loaded while waiting: the upload does not pay for it
+        _warm_up(limits)
+    line = sys.stdin.buffer.readline()
+    if not line:
+        return 0
     data = sys.stdin.buffer.read()
-    doc = _answer(spec, data)
+    doc = _answer(limits, json.loads(line), data)
     sys.stdout.write(json.dumps(doc))
     sys.stdout.flush()
     return 0
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    code = main()
+    sys.stderr.flush()
+    os._exit(code)  # skip the interpreter's teardown (scipy & co.: about 0.5 s): the answer is written

@@ -341,6 +341,8 @@ class ViewerApp:
         self.fits = FitRunner(server.limits)
 
     async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] == "lifespan":
+            return await self._lifespan(receive, send)
         if scope["type"] != "http":
             return
         req = _Request.from_scope(scope)
@@ -361,8 +363,21 @@ class ViewerApp:
         await send({"type": "http.response.start", "status": answer.status, "headers": headers})
         await send({"type": "http.response.body", "body": answer.body})
 
+    async def _lifespan(self, receive, send) -> None:
+        """ASGI lifespan: stop the warm fit process at shutdown."""
+        while True:
+            message = await receive()
+            if message["type"] == "lifespan.startup":
+                await send({"type": "lifespan.startup.complete"})
+            elif message["type"] == "lifespan.shutdown":
+                await self.fits.close()
+                await send({"type": "lifespan.shutdown.complete"})
+                return
+
     async def _dispatch(self, req: _Request, receive) -> _Answer | None:
         loop = asyncio.get_running_loop()
+        if req.method == "GET" and req.path in ("/", "/index.html"):
+            self.fits.prepare()  # the page is opening: an upload may follow
         if req.method in ("GET", "HEAD"):
             return await loop.run_in_executor(self.server.executor, self._get, req)
         if req.method == "POST":
@@ -533,7 +548,7 @@ class ViewerServer:
             http=protocol_class(self.limits, SERVER_NAME),
             loop="asyncio",
             ws="none",
-            lifespan="off",
+            lifespan="on",
             interface="asgi3",
             proxy_headers=False,
             server_header=False,
