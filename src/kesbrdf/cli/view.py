@@ -167,9 +167,10 @@ def run(args) -> int:
 
         webbrowser.open(url)
     try:
-        server.serve_forever()
+        server.serve_forever()  # returns after Ctrl-C or SIGTERM (uvicorn handles both)
     except KeyboardInterrupt:
-        print("kesbrdf viewer: stopped", file=sys.stderr)
+        pass
     finally:
         server.server_close()
+    print("kesbrdf viewer: stopped", file=sys.stderr)
     return 0
