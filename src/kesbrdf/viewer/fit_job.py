@@ -182,15 +182,17 @@ def _answer(limits: ViewerLimits, request: dict, data: bytes) -> dict:
     return {"status": 200, "model": model, "measurement": measurement, "size": size}
 
 
-def _warm_up(limits: ViewerLimits) -> None:
-    """Load every module a fit uses, by fitting the built-in demo measurement (~50 ms)."""
+def _warm_up() -> None:
+    """Load the modules a fit uses (about 1 CPU-s, mostly scipy)."""
+    import kesbrdf.fitting  # noqa: F401
+    import kesbrdf.io.measurement_csv  # noqa: F401
+    import kesbrdf.model  # noqa: F401
+    import kesbrdf.viewer.upload  # noqa: F401
+
     try:
         import scipy.optimize  # noqa: F401 - the scattered and prior fits
     except ImportError:
         pass
-    from kesbrdf.demo_data import embedded_measurement
-
-    _answer(limits, {"name": "warm-up.csv", "fallback": None}, embedded_measurement().read_bytes())
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -205,7 +207,7 @@ def main(argv: list[str] | None = None) -> int:
     limits = ViewerLimits(**json.loads(args[0]))
     _limit_cpu(limits.fit_cpu_s)
     if "--warm" in args[1:]:  # loaded while waiting: the upload does not pay for it
-        _warm_up(limits)
+        _warm_up()
     line = sys.stdin.buffer.readline()
     if not line:
         return 0
