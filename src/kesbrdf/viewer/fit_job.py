@@ -3,9 +3,10 @@
 The server never parses or fits an upload itself: :class:`FitRunner` hands the CSV to
 a ``python -m kesbrdf.viewer.fit_job`` process on stdin and reads one JSON answer from
 stdout.  Each process serves one upload; the next one is started ahead (its Python
-and the fit's modules loaded while it waits), so an upload does not wait for a start.  The child limits its own CPU time (``RLIMIT_CPU`` = ``fit_cpu_s``; the
-kernel stops it with SIGXCPU) and the parent kills it at ``fit_wall_s`` of wall-clock
-time, so one upload costs at most its budget whatever its content.  At most
+and the fit's modules loaded while it waits), so an upload does not wait for a start.
+The child limits its own CPU time (``RLIMIT_CPU`` = ``fit_cpu_s``; the kernel stops it
+with SIGXCPU) and the parent kills it at ``fit_wall_s`` of wall-clock time, so one
+upload costs at most its budget whatever its content.  At most
 ``fit_workers`` fits run at once and ``fit_queue`` wait; further uploads get 503.
 
 Answers (``status``, JSON document):
