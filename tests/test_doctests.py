@@ -19,7 +19,7 @@ import kesbrdf
 OPTIONAL = {
     "matplotlib", "mitsuba", "drjit", "newton", "warp", "imageio", "tifffile", "OpenEXR", "PIL",
     "rich", "dask", "distributed", "fsspec", "pyarrow", "tqdm", "MaterialX", "pxr", "pygltflib",
-    "flip_evaluator", "pyoidn", "scipy", "imageio_ffmpeg",
+    "flip_evaluator", "pyoidn", "scipy", "imageio_ffmpeg", "uvicorn", "h11",
 }
 
 

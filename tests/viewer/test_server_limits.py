@@ -15,22 +15,22 @@ from kesbrdf.errors import KesbrdfError
 from kesbrdf.io.text import MAX_LINE_CHARS
 from kesbrdf.model import load
 from kesbrdf.viewer import server as server_module
-from kesbrdf.viewer.server import MAX_FIT_CHANNELS, ModelStore, make_server
+from kesbrdf.viewer.server import MAX_FIT_CHANNELS, ModelStore, ViewerLimits, make_server
 
-#: Socket timeout of the servers under test (s): short so that the tests are quick.
+#: Head and body deadlines of the servers under test (s): short so that the tests are quick.
 SHORT_TIMEOUT_S = 0.5
 #: Longest a test waits for the server to react (s); generous for a loaded machine.
 WAIT_S = 20.0
 
 
 @pytest.fixture
-def serve(tmp_path, monkeypatch):
-    """Start servers with a short socket timeout; stop them after the test."""
-    monkeypatch.setattr(server_module._Handler, "timeout", SHORT_TIMEOUT_S)
+def serve(tmp_path):
+    """Start servers with short head and body deadlines; stop them after the test."""
     started = []
 
-    def start(**kwargs):
-        srv = make_server(port=0, **kwargs)
+    def start(limits=None, **kwargs):
+        limits = limits or ViewerLimits(head_timeout_s=SHORT_TIMEOUT_S, body_timeout_s=SHORT_TIMEOUT_S)
+        srv = make_server(port=0, limits=limits, **kwargs)
         thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True)
         thread.start()
         started.append((srv, thread))
@@ -104,10 +104,9 @@ def test_an_incomplete_upload_body_gets_408_and_is_closed(serve):
     assert get(srv, "/api/config")[0] == 200
 
 
-def test_connections_beyond_the_cap_are_closed_at_once(serve, monkeypatch):
-    monkeypatch.setattr(server_module.ViewerServer, "max_connections", 2)
-    monkeypatch.setattr(server_module._Handler, "timeout", WAIT_S)  # the two idle ones stay open
-    srv = serve()
+def test_connections_beyond_the_cap_are_closed_at_once(serve):
+    # the two idle ones stay open for the whole test
+    srv = serve(ViewerLimits(max_connections=2, head_timeout_s=WAIT_S))
     idle = [socket.create_connection(srv.server_address[:2], timeout=WAIT_S) for _ in range(2)]
     try:
         time.sleep(0.3)  # let the server accept both

@@ -1,7 +1,8 @@
 """Local HTTP server of the web viewer: static bundle plus a small JSON API.
 
-Standard library only (:mod:`http.server`).  The server binds to 127.0.0.1 by
-default and serves
+An ASGI application served by uvicorn (HTTP/1.1 through h11; docs/decisions.md, "Viewer
+server: uvicorn, deadlines and fit budgets").  The server binds to 127.0.0.1 by default
+and serves
 
 * the built viewer bundle from ``kesbrdf/viewer/static/`` (``GET /``, ``GET /assets/...``);
 * ``GET /api/config``: ``{"initial": id or null, "max_upload_bytes": n, "version": ...}``;
@@ -13,46 +14,69 @@ default and serves
   :func:`kesbrdf.fit` with its defaults (kind chosen from the data, as ``kesbrdf fit``
   with ``--no-compare``: the viewer draws the KES kinds, not ``fibre-prior``;
   ``fallback=error`` is ``--strict``, ``log`` the default), keeps the result in memory
-  and answers like ``/api/model``.
+  and answers like ``/api/model``.  The fit runs in a child process within a work
+  budget (:mod:`kesbrdf.viewer.fit_job`).
 
-Errors come back as ``{"error": "<one line>"}`` with a 4xx status (the same message
+Errors come back as ``{"error": "<one line>"}`` with a 4xx/5xx status (the same message
 the CLI prints for the same input); the server keeps running.  Request bodies larger
 than ``max_upload_bytes`` are refused with 413 before they are read.
 
-Limits (``docs/formats.md``, "Viewer server limits"): a connection that sends nothing for
-:data:`REQUEST_TIMEOUT_S` seconds is closed (408 if a body was pending); at most
-:data:`MAX_CONNECTIONS` connections are served at once; an upload may have at most
-:data:`MAX_FIT_CHANNELS` channels and :data:`MAX_FIT_VALUES` values (413 otherwise,
-checked before fitting); a fitted answer larger than :data:`MAX_RESPONSE_BYTES` is
-refused with 413; fitted uploads are kept in a cache of at most
+Limits (:class:`kesbrdf.viewer.limits.ViewerLimits`; docs/formats.md, "Viewer server
+limits"): a request's head must be complete within ``head_timeout_s`` and its body within
+``body_timeout_s`` (whole-request deadlines: 408 and closed); at most
+``max_connections`` connections are open at once (further ones closed at accept), with a
+listen backlog of ``backlog``; file and JSON work runs on ``worker_threads`` threads; an
+upload is refused with 413 before fitting when it has too many channels or rows x
+channels for the kind it would be fitted with, and with 422 when its fit runs out of
+``fit_cpu_s`` CPU seconds or ``fit_wall_s`` seconds; a fitted answer larger than
+``max_response_bytes`` is refused with 413; fitted uploads are kept in a cache of at most
 :data:`MAX_UPLOADS_KEPT` entries and :data:`MAX_UPLOAD_CACHE_BYTES` bytes (oldest
-dropped first; the model given on the command line is kept).  Only files
-inside the static folder and the model files listed by ``/api/models`` are
-reachable: every static path is resolved (symlinks included) and must stay inside
-the static folder; models are addressed by id, never by path.
+dropped first; the model given on the command line is kept).  Only files inside the
+static folder and the model files listed by ``/api/models`` are reachable: every static
+path is resolved (symlinks included) and must stay inside the static folder; models are
+addressed by id, never by path.
 """
 
 from __future__ import annotations
 
-import base64
+import asyncio
 import json
 import os
-import re
-import tempfile
+import socket
 import threading
 import urllib.parse
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
-from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
 from kesbrdf._version import __version__
 from kesbrdf.errors import KesbrdfError, ModelError, where, validate_choice
+from kesbrdf.viewer.limits import (
+    DEFAULT_MAX_UPLOAD_BYTES,
+    HEAD_TIMEOUT_S,
+    BODY_TIMEOUT_S,
+    MAX_CONNECTIONS,
+    MAX_FIT_CHANNELS,
+    MAX_FIT_VALUES,
+    MAX_RESPONSE_BYTES,
+    MAX_UPLOADS_KEPT,
+    MAX_UPLOAD_CACHE_BYTES,
+    ViewerLimits,
+)
+from kesbrdf.viewer.upload import (
+    UploadTooLarge,
+    check_upload_work,
+    fit_csv_bytes,
+    measurement_to_json,
+    safe_upload_name,
+)
 
 __all__ = [
     "DEFAULT_MAX_UPLOAD_BYTES",
     "STATIC_DIR",
     "ModelEntry",
     "ModelStore",
+    "ViewerLimits",
     "ViewerServer",
     "make_server",
     "load_model_json",
@@ -61,7 +85,8 @@ __all__ = [
     "measurement_to_json",
     "check_upload_work",
     "UploadTooLarge",
-    "REQUEST_TIMEOUT_S",
+    "HEAD_TIMEOUT_S",
+    "BODY_TIMEOUT_S",
     "MAX_CONNECTIONS",
     "MAX_FIT_CHANNELS",
     "MAX_FIT_VALUES",
@@ -70,32 +95,11 @@ __all__ = [
     "MAX_UPLOAD_CACHE_BYTES",
 ]
 
-#: Default upload limit: a dense 3° gonio CSV of four orientations is ~10 kB, a
-#: hemispherical RGB scan a few MB.
-DEFAULT_MAX_UPLOAD_BYTES = 5 * 1024 * 1024
-
-#: Seconds a connection may stay silent (request line, headers, body, keep-alive idle).
-REQUEST_TIMEOUT_S = 30.0
-
-#: Connections served at once; more are closed at accept.
-MAX_CONNECTIONS = 32
-
-#: Channels one upload may have: the fit's time and memory grow with channels x grid
-#: (a 300-channel upload took 35 s and 1.5 GB); 32 covers 400-700 nm at 10 nm.
-MAX_FIT_CHANNELS = 32
-
-#: Rows x channels one upload may have.
-MAX_FIT_VALUES = 2_000_000
-
-#: Largest JSON answer to one fit (model + measurement), bytes.
-MAX_RESPONSE_BYTES = 32 * 1024 * 1024
-
-#: Fitted uploads kept in memory (oldest dropped first) and their total JSON size.
-MAX_UPLOADS_KEPT = 8
-MAX_UPLOAD_CACHE_BYTES = 64 * 1024 * 1024
-
 #: The built bundle shipped inside the package (``make viewer-bundle``).
 STATIC_DIR = Path(__file__).resolve().parent / "static"
+
+#: The ``Server`` header of every answer.
+SERVER_NAME = f"kesbrdf-view/{__version__}"
 
 _CONTENT_TYPES = {
     ".html": "text/html; charset=utf-8",
@@ -109,7 +113,6 @@ _CONTENT_TYPES = {
     ".txt": "text/plain; charset=utf-8",
     ".map": "application/json",
 }
-_SAFE_NAME = re.compile(r"[^A-Za-z0-9._ -]+")
 _LOOPBACK_NAMES = {"127.0.0.1", "localhost", "::1"}
 _MODEL_SUFFIXES = (".kes.json",)
 
@@ -153,35 +156,6 @@ def load_model_json(path: str | os.PathLike) -> dict:
     return doc
 
 
-def _array_json(a) -> dict:
-    """Encode a float array like the model file does (docs/formats.md)."""
-    import numpy as np
-
-    a = np.ascontiguousarray(np.asarray(a, dtype="<f8"))
-    return {
-        "dtype": "<f8",
-        "shape": list(a.shape),
-        "data": base64.b64encode(a.tobytes()).decode("ascii"),
-    }
-
-
-def measurement_to_json(measurement) -> dict:
-    """Viewer-friendly measurement: angles in radians, f_r in 1/sr, arrays as in model files."""
-    import numpy as np
-
-    psi = measurement.psi
-    return {
-        "channels": list(measurement.channels),
-        "theta_i": _array_json(measurement.theta_i),
-        "phi_i": _array_json(measurement.phi_i),
-        "theta_r": _array_json(measurement.theta_r),
-        "phi_r": _array_json(measurement.phi_r),
-        "values": _array_json(measurement.values),
-        "psi": None if psi is None else _array_json(np.where(np.isnan(psi), -1.0, psi)),
-        "metadata": {str(k): str(v) for k, v in dict(measurement.metadata).items()},
-        "notes": [str(n) for n in measurement.notes],
-    }
-
 
 def find_input_measurement(model_path: str | os.PathLike, model_doc: dict) -> dict | None:
     """The measurement a model was fitted from, if its recorded input file is still there.
@@ -206,87 +180,6 @@ def find_input_measurement(model_path: str | os.PathLike, model_doc: dict) -> di
         except (OSError, KesbrdfError):
             continue
     return None
-
-
-def _safe_upload_name(name: str | None) -> str:
-    base = os.path.basename((name or "upload.csv").replace("\\", "/")).strip()
-    base = _SAFE_NAME.sub("_", base).lstrip(".") or "upload.csv"
-    return base[:100]
-
-
-def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = None):
-    """Read and fit an uploaded measurement CSV; return ``(model_json, measurement_json)``.
-
-    The CSV is written to a private temporary folder under its (sanitised) upload
-    name, so error messages read ``name.csv:12: ...`` exactly like
-    ``kesbrdf fit name.csv`` would print them.
-    """
-    try:
-        from kesbrdf.fitting import fit
-        from kesbrdf.io.measurement_csv import read_measurement
-    except ImportError as exc:  # pragma: no cover - core always ships these
-        raise ModelError(f"fitting is not available in this installation: {exc}") from None
-    safe = _safe_upload_name(name)
-    with tempfile.TemporaryDirectory(prefix="kesbrdf-view-") as tmp:
-        csv_path = Path(tmp) / safe
-        csv_path.write_bytes(data)
-        prefix = str(Path(tmp)) + os.sep
-        try:
-            measurement = read_measurement(csv_path)
-            # the same entry point and defaults as `kesbrdf fit`; fallback=error is --strict.
-            # compare=False: the viewer's shaders draw the KES kinds only, so the held-out
-            # comparison with the woven-cloth prior (which may keep a fibre-prior model) is
-            # skipped, as the demo does for its figures and renders (docs/models.md)
-            model, _report = fit(measurement, strict=fallback == "error", compare=False)
-            out = Path(tmp) / (Path(safe).stem + ".kes.json")
-            model.save(out)
-            model_doc = json.loads(out.read_text(encoding="utf-8"))
-            info = model_doc.get("input")
-            if isinstance(info, dict) and str(info.get("name", "")).startswith(prefix):
-                info["name"] = safe  # the upload's name, not the temporary path
-        except KesbrdfError as exc:
-            # name the upload, not the private temporary folder
-            message = str(exc).replace(prefix, "")
-            try:
-                renamed = type(exc)(message)
-            except TypeError:  # a subclass with a different constructor
-                renamed = KesbrdfError(message)
-            raise renamed from None
-    return model_doc, measurement_to_json(measurement)
-
-
-class UploadTooLarge(KesbrdfError):
-    """An upload would cost more work or memory than the server allows (HTTP 413)."""
-
-
-def check_upload_work(data: bytes, name: str = "upload.csv") -> None:
-    """Refuse an upload whose fit would be too costly, before fitting it.
-
-    Parses the CSV (the reader's errors, named ``name:line``, come out unchanged) and
-    checks channels and values against :data:`MAX_FIT_CHANNELS` and :data:`MAX_FIT_VALUES`.
-
-    Raises
-    ------
-    UploadTooLarge
-        Too many channels or values.
-    KesbrdfError
-        The CSV is malformed (same message as ``kesbrdf fit name``).
-    """
-    from kesbrdf.io.measurement_csv import parse_measurement
-    from kesbrdf.io.text import decode_text
-
-    measurement = parse_measurement(decode_text(data, name), source=name)
-    n_channels = len(measurement.channels)
-    if n_channels > MAX_FIT_CHANNELS:
-        raise UploadTooLarge(
-            f"{name}: expected at most {MAX_FIT_CHANNELS} channels for a fit in the viewer, got {n_channels}; "
-            "fit it with 'kesbrdf fit' and open the model file"
-        )
-    values = len(measurement) * n_channels
-    if values > MAX_FIT_VALUES:
-        raise UploadTooLarge(
-            f"{name}: expected at most {MAX_FIT_VALUES} values (rows x channels) for a fit in the viewer, got {values}"
-        )
 
 
 @dataclass
@@ -383,171 +276,226 @@ class ModelStore:
 
 
 # -- HTTP ---------------------------------------------------------------------------
-class _Handler(BaseHTTPRequestHandler):
-    server: "ViewerServer"
-    server_version = f"kesbrdf-view/{__version__}"
-    protocol_version = "HTTP/1.1"
-    #: socket timeout (StreamRequestHandler applies it): half-open requests do not stay open
-    timeout = REQUEST_TIMEOUT_S
+@dataclass
+class _Answer:
+    status: int
+    body: bytes
+    content_type: str = "application/json"
+    close: bool = False
 
-    def log_message(self, format, *args):  # noqa: A002 - signature from the base class
-        if self.server.verbose:
-            super().log_message(format, *args)
 
-    # -- replies
-    def _send(self, status: int, body: bytes, content_type: str, close: bool = False) -> None:
-        self.send_response(status)
-        self.send_header("Content-Type", content_type)
-        self.send_header("Content-Length", str(len(body)))
-        self.send_header("Cache-Control", "no-store")
-        self.send_header("X-Content-Type-Options", "nosniff")
-        if close:
-            self.send_header("Connection", "close")
-            self.close_connection = True
-        self.end_headers()
-        if self.command != "HEAD":
-            self.wfile.write(body)
+def _json(status: int, doc, close: bool = False) -> _Answer:
+    return _Answer(status, json.dumps(doc).encode("utf-8"), "application/json", close)
 
-    def _json(self, status: int, doc, close: bool = False) -> None:
-        self._send(status, json.dumps(doc).encode("utf-8"), "application/json", close=close)
 
-    def _error(self, status: int, message: str, close: bool = False) -> None:
-        self._json(status, {"error": " ".join(str(message).split())}, close=close)
+def _error(status: int, message: str, close: bool = False) -> _Answer:
+    return _json(status, {"error": " ".join(str(message).split())}, close=close)
+
+
+@dataclass
+class _Request:
+    """The parts of an ASGI request the routes read (path undecoded, as sent)."""
+
+    method: str
+    path: str
+    query: dict
+    headers: dict = field(default_factory=dict)  # lower-case name -> first value
+
+    @classmethod
+    def from_scope(cls, scope: dict) -> "_Request":
+        headers: dict[str, str] = {}
+        for name, value in scope["headers"]:
+            headers.setdefault(name.decode("latin-1").lower(), value.decode("latin-1"))
+        raw = scope.get("raw_path") or scope["path"].encode("utf-8")
+        return cls(
+            method=scope["method"],
+            path=raw.decode("latin-1"),
+            query=urllib.parse.parse_qs(scope.get("query_string", b"").decode("latin-1")),
+            headers=headers,
+        )
+
+
+async def _read_body(receive, length: int) -> bytes | None:
+    """The request body (``length`` bytes announced), or None when the client went away."""
+    chunks, size = [], 0
+    while True:
+        message = await receive()
+        if message["type"] == "http.disconnect":
+            return None
+        chunk = message.get("body", b"")
+        chunks.append(chunk)
+        size += len(chunk)
+        if size > length:  # h11 enforces Content-Length; never keep more than announced
+            return None
+        if not message.get("more_body", False):
+            return b"".join(chunks)
+
+
+class ViewerApp:
+    """The viewer's ASGI application: routes, model store, fits (module docstring)."""
+
+    def __init__(self, server: "ViewerServer") -> None:
+        self.server = server
+        from kesbrdf.viewer.fit_job import FitRunner
+
+        self.fits = FitRunner(server.limits)
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] == "lifespan":
+            return await self._lifespan(receive, send)
+        if scope["type"] != "http":
+            return
+        req = _Request.from_scope(scope)
+        try:
+            answer = await self._dispatch(req, receive)
+        except Exception as exc:  # keep serving whatever happens
+            answer = _error(500, f"internal error: {type(exc).__name__}: {exc}", close=req.method == "POST")
+        if answer is None:  # the client went away
+            return
+        headers = [
+            (b"content-type", answer.content_type.encode()),
+            (b"content-length", str(len(answer.body)).encode()),
+            (b"cache-control", b"no-store"),
+            (b"x-content-type-options", b"nosniff"),
+        ]
+        if answer.close:
+            headers.append((b"connection", b"close"))
+        await send({"type": "http.response.start", "status": answer.status, "headers": headers})
+        await send({"type": "http.response.body", "body": answer.body})
+
+    async def _lifespan(self, receive, send) -> None:
+        """ASGI lifespan: stop the warm fit process at shutdown."""
+        while True:
+            message = await receive()
+            if message["type"] == "lifespan.startup":
+                await send({"type": "lifespan.startup.complete"})
+            elif message["type"] == "lifespan.shutdown":
+                await self.fits.close()
+                await send({"type": "lifespan.shutdown.complete"})
+                return
+
+    async def _dispatch(self, req: _Request, receive) -> _Answer | None:
+        loop = asyncio.get_running_loop()
+        if req.method == "GET" and req.path in ("/", "/index.html"):
+            self.fits.prepare()  # the page is opening: an upload may follow
+        if req.method in ("GET", "HEAD"):
+            return await loop.run_in_executor(self.server.executor, self._get, req)
+        if req.method == "POST":
+            foreign = self._foreign(req)
+            if foreign is not None:
+                return foreign
+            parsed = urllib.parse.urlsplit(req.path)
+            if parsed.path != "/api/fit":
+                return _error(404, f"unknown API endpoint {parsed.path}", close=True)
+            return await self._post_fit(req, receive)
+        return _error(501, f"expected GET, HEAD or POST, got {req.method}", close=True)
 
     # -- routing
-    def _foreign(self) -> bool:
-        """True (and answered 403) for requests another web site makes through the user's browser.
+    def _foreign(self, req: _Request) -> _Answer | None:
+        """A 403 for requests another web site makes through the user's browser, else None.
 
         On a loopback address the Host header must name this machine (no DNS
         rebinding), and a request that carries an Origin must come from the viewer's
         own origin (no cross-site uploads).
         """
-        host = (self.headers.get("Host") or "").strip().lower()
+        host = (req.headers.get("host") or "").strip().lower()
         hostname = urllib.parse.urlsplit(f"//{host}").hostname or ""
         if self.server.loopback and hostname not in _LOOPBACK_NAMES:
-            self._error(403, f"expected a request to this machine, got Host {host!r}", close=True)
-            return True
-        origin = self.headers.get("Origin")
+            return _error(403, f"expected a request to this machine, got Host {host!r}", close=True)
+        origin = req.headers.get("origin")
         if origin is not None and urllib.parse.urlsplit(origin).netloc.lower() != host:
-            self._error(403, f"expected a request from the viewer's page, got Origin {origin!r}", close=True)
-            return True
-        return False
+            return _error(403, f"expected a request from the viewer's page, got Origin {origin!r}", close=True)
+        return None
 
-    def do_HEAD(self):  # noqa: N802 - http.server naming
-        self.do_GET()
+    def _get(self, req: _Request) -> _Answer:
+        """GET and HEAD (on a worker thread: reads files, encodes JSON)."""
+        foreign = self._foreign(req)
+        if foreign is not None:
+            return foreign
+        path = urllib.parse.urlsplit(req.path).path
+        if path == "/api/config":
+            return _json(200, self.server.config())
+        if path == "/api/models":
+            entries = self.server.store.scan()
+            return _json(200, {"models": [_entry_summary(e) for e in entries]})
+        if path.startswith("/api/model/"):
+            return self._get_model(urllib.parse.unquote(path[len("/api/model/"):]))
+        if path.startswith("/api/"):
+            return _error(404, f"unknown API endpoint {path}")
+        return self._static(path)
 
-    def do_GET(self):  # noqa: N802
-        if self._foreign():
-            return None
-        try:
-            parsed = urllib.parse.urlsplit(self.path)
-            path = parsed.path
-            if path == "/api/config":
-                return self._json(200, self.server.config())
-            if path == "/api/models":
-                entries = self.server.store.scan()
-                return self._json(200, {"models": [_entry_summary(e) for e in entries]})
-            if path.startswith("/api/model/"):
-                return self._get_model(urllib.parse.unquote(path[len("/api/model/"):]))
-            if path.startswith("/api/"):
-                return self._error(404, f"unknown API endpoint {path}")
-            return self._static(path)
-        except Exception as exc:  # keep serving whatever happens
-            return self._error(500, f"internal error: {type(exc).__name__}: {exc}")
-
-    def do_POST(self):  # noqa: N802
-        if self._foreign():
-            return None
-        try:
-            parsed = urllib.parse.urlsplit(self.path)
-            if parsed.path != "/api/fit":
-                return self._error(404, f"unknown API endpoint {parsed.path}", close=True)
-            return self._post_fit(urllib.parse.parse_qs(parsed.query))
-        except Exception as exc:
-            return self._error(500, f"internal error: {type(exc).__name__}: {exc}", close=True)
-
-    def _get_model(self, entry_id: str) -> None:
+    def _get_model(self, entry_id: str) -> _Answer:
         store = self.server.store
         entry = store.get(entry_id)
         if entry is None:
             store.scan()
             entry = store.get(entry_id)
         if entry is None:
-            return self._error(404, f"no model with id {entry_id!r}; see /api/models")
+            return _error(404, f"no model with id {entry_id!r}; see /api/models")
         if entry.kind == "file":
             try:
                 model = load_model_json(entry.path)
             except (KesbrdfError, OSError) as exc:
                 msg = f"{exc.filename}: {exc.strerror}" if isinstance(exc, OSError) else str(exc)
-                return self._error(422, msg)
+                return _error(422, msg)
             except Exception as exc:  # a loader bug must not look like a server crash: still the file's fault
-                return self._error(422, f"{where(entry.path)}cannot load model file: {type(exc).__name__}: {exc}")
+                return _error(422, f"{where(entry.path)}cannot load model file: {type(exc).__name__}: {exc}")
             measurement = entry.measurement or find_input_measurement(entry.path, model)
         else:
             model, measurement = entry.model, entry.measurement
-        return self._json(
-            200, {"id": entry.id, "name": entry.name, "model": model, "measurement": measurement}
-        )
+        return _json(200, {"id": entry.id, "name": entry.name, "model": model, "measurement": measurement})
 
-    def _post_fit(self, query: dict) -> None:
+    def _static(self, url_path: str) -> _Answer:
+        target = self.server.resolve_static(url_path)
+        if target is None:
+            return _error(404, f"not found: {url_path}")
+        ctype = _CONTENT_TYPES.get(target.suffix.lower(), "application/octet-stream")
+        return _Answer(200, target.read_bytes(), ctype)
+
+    async def _post_fit(self, req: _Request, receive) -> _Answer | None:
+        limits = self.server.limits
         limit = self.server.max_upload_bytes
-        if "chunked" in self.headers.get("Transfer-Encoding", "").lower():
-            return self._error(411, "expected a Content-Length, got a chunked upload", close=True)
-        length_text = self.headers.get("Content-Length")
+        if "chunked" in req.headers.get("transfer-encoding", "").lower():
+            return _error(411, "expected a Content-Length, got a chunked upload", close=True)
+        length_text = req.headers.get("content-length")
         if length_text is None:
-            return self._error(411, "expected a Content-Length header on the upload", close=True)
+            return _error(411, "expected a Content-Length header on the upload", close=True)
         try:
             length = int(length_text)
             if length < 0:
                 raise ValueError
         except ValueError:
-            return self._error(400, f"expected a Content-Length, got {length_text!r}", close=True)
+            return _error(400, f"expected a Content-Length, got {length_text!r}", close=True)
         if length > limit:
             # refuse without reading: the connection is closed after the reply
-            return self._error(
-                413, f"upload too large: {length} bytes, limit {limit} bytes", close=True
-            )
+            return _error(413, f"upload too large: {length} bytes, limit {limit} bytes", close=True)
         try:
-            data = self.rfile.read(length)
+            async with asyncio.timeout(limits.body_timeout_s):  # whole body, not per read
+                data = await _read_body(receive, length)
         except TimeoutError:
-            return self._error(408, f"upload incomplete after {self.timeout:g} s; expected {length} bytes", close=True)
+            return _error(
+                408,
+                f"upload incomplete after {limits.body_timeout_s:g} s (kesbrdf view --body-timeout-s); "
+                f"expected {length} bytes",
+                close=True,
+            )
+        if data is None:
+            return None
         if len(data) != length:
-            return self._error(400, f"upload incomplete: expected {length} bytes, got {len(data)}", close=True)
-        name = _safe_upload_name((query.get("name") or ["upload.csv"])[0])
-        fallback = (query.get("fallback") or [None])[0]
+            return _error(400, f"upload incomplete: expected {length} bytes, got {len(data)}", close=True)
+        name = safe_upload_name((req.query.get("name") or ["upload.csv"])[0])
+        fallback = (req.query.get("fallback") or [None])[0]
         try:
             if fallback is not None:
                 validate_choice("fallback", fallback, ("error", "log"))
         except KesbrdfError as exc:
-            return self._error(400, str(exc))
-        try:
-            check_upload_work(data, name)
-        except UploadTooLarge as exc:
-            return self._error(413, str(exc))
-        except KesbrdfError as exc:
-            return self._error(400, str(exc))
-        try:
-            model, measurement = fit_csv_bytes(data, name, fallback)
-        except KesbrdfError as exc:
-            return self._error(400, str(exc))
-        except UnicodeDecodeError as exc:
-            return self._error(400, f"{name}: expected UTF-8 text, got undecodable bytes ({exc.reason})")
-        size = len(json.dumps(model)) + len(json.dumps(measurement))
-        if size > MAX_RESPONSE_BYTES:
-            return self._error(
-                413, f"{name}: the fitted model would be {size} bytes of JSON, limit {MAX_RESPONSE_BYTES} bytes"
-            )
-        entry = self.server.store.add_upload(name, model, measurement, size=size)
-        return self._json(
-            200, {"id": entry.id, "name": entry.name, "model": model, "measurement": measurement}
-        )
-
-    def _static(self, url_path: str) -> None:
-        target = self.server.resolve_static(url_path)
-        if target is None:
-            return self._error(404, f"not found: {url_path}")
-        ctype = _CONTENT_TYPES.get(target.suffix.lower(), "application/octet-stream")
-        return self._send(200, target.read_bytes(), ctype)
+            return _error(400, str(exc))
+        status, doc = await self.fits.fit(data, name, fallback)
+        if status != 200:
+            return _error(status, doc["error"])
+        entry = self.server.store.add_upload(name, doc["model"], doc["measurement"], size=doc["size"])
+        answer = {"id": entry.id, "name": entry.name, "model": doc["model"], "measurement": doc["measurement"]}
+        return await asyncio.get_running_loop().run_in_executor(self.server.executor, _json, 200, answer)
 
 
 def _entry_summary(entry: ModelEntry) -> dict:
@@ -559,12 +507,12 @@ def _entry_summary(entry: ModelEntry) -> dict:
     }
 
 
-class ViewerServer(ThreadingHTTPServer):
-    """The viewer's HTTP server; see the module docstring for the API."""
+class ViewerServer:
+    """The viewer's HTTP server (uvicorn); bound and listening from construction on.
 
-    daemon_threads = True
-    allow_reuse_address = True
-    max_connections = MAX_CONNECTIONS
+    ``serve_forever()`` serves until ``shutdown()`` (from another thread) or Ctrl-C;
+    ``server_close()`` releases the socket and the worker threads.
+    """
 
     def __init__(
         self,
@@ -574,33 +522,70 @@ class ViewerServer(ThreadingHTTPServer):
         max_upload_bytes: int = DEFAULT_MAX_UPLOAD_BYTES,
         initial: str | None = None,
         verbose: bool = False,
+        limits: ViewerLimits | None = None,
     ) -> None:
-        super().__init__(address, _Handler)
+        try:
+            import uvicorn
+
+            from kesbrdf.viewer.connection import protocol_class
+        except ImportError as exc:
+            raise KesbrdfError(f"the viewer server needs uvicorn ({exc}): pip install 'kesbrdf[viewer]'") from None
+        self.limits = limits or ViewerLimits()
         self.store = store
         self.static_dir = Path(static_dir).resolve()
         self.max_upload_bytes = int(max_upload_bytes)
         self.initial = initial
         self.verbose = verbose
-        host = str(self.server_address[0])
+        host = str(address[0])
+        family = socket.AF_INET6 if ":" in host else socket.AF_INET
+        # listening from here on: connections wait in the backlog until serve_forever
+        self.socket = socket.create_server(tuple(address), family=family, backlog=self.limits.backlog)
+        self.server_address = self.socket.getsockname()
         self.loopback = host.startswith("127.") or host in ("::1", "localhost")
-        self._active = threading.BoundedSemaphore(self.max_connections)
+        self.executor = ThreadPoolExecutor(self.limits.worker_threads, thread_name_prefix="kesbrdf-view")
+        config = uvicorn.Config(
+            ViewerApp(self),
+            http=protocol_class(self.limits, SERVER_NAME),
+            loop="asyncio",
+            ws="none",
+            lifespan="on",
+            interface="asgi3",
+            proxy_headers=False,
+            server_header=False,
+            headers=[("Server", SERVER_NAME)],
+            backlog=self.limits.backlog,
+            timeout_keep_alive=self.limits.keep_alive_s,
+            timeout_graceful_shutdown=2,
+            h11_max_incomplete_event_size=self.limits.max_head_bytes,
+            log_config=None,
+            log_level="info" if verbose else "error",
+            access_log=verbose,
+        )
+        self._uvicorn = uvicorn.Server(config)
+        self._serving = threading.Event()
+        self._stopped = threading.Event()
+        self._stopped.set()
 
-    def process_request(self, request, client_address):
-        """Serve in a thread, or close at once when :data:`MAX_CONNECTIONS` are open."""
-        if not self._active.acquire(blocking=False):
-            self.shutdown_request(request)
-            return
+    def serve_forever(self, poll_interval: float = 0.5) -> None:
+        """Serve until :meth:`shutdown` (``poll_interval`` is kept for compatibility: uvicorn polls every 0.1 s)."""
+        self._stopped.clear()
+        self._serving.set()
         try:
-            super().process_request(request, client_address)
-        except BaseException:
-            self._active.release()
-            raise
-
-    def process_request_thread(self, request, client_address):
-        try:
-            super().process_request_thread(request, client_address)
+            self._uvicorn.run(sockets=[self.socket])
         finally:
-            self._active.release()
+            self._serving.clear()
+            self._stopped.set()
+
+    def shutdown(self) -> None:
+        """Stop :meth:`serve_forever` and wait until it has returned."""
+        self._uvicorn.should_exit = True
+        if self._serving.is_set():
+            self._stopped.wait()
+
+    def server_close(self) -> None:
+        """Close the listening socket and stop the worker threads."""
+        self.socket.close()
+        self.executor.shutdown(wait=False, cancel_futures=True)
 
     @property
     def url(self) -> str:
@@ -648,6 +633,7 @@ def make_server(
     initial_upload: tuple[str, dict, dict | None] | None = None,
     measurement=None,
     verbose: bool = False,
+    limits: ViewerLimits | None = None,
 ) -> ViewerServer:
     """Build (not start) a viewer server; ``port=0`` picks a free port.
 
@@ -662,6 +648,8 @@ def make_server(
     measurement : path, optional
         Measurement CSV shown with the first model file (hemisphere comparison);
         without it, the model's recorded input file is used when found unchanged.
+    limits : ViewerLimits, optional
+        Deadlines, connection and work budgets (default: :class:`ViewerLimits()`).
     """
     for f in model_files:
         load_model_json(f)  # fail early with the CLI's message
@@ -679,5 +667,5 @@ def make_server(
     elif entries:
         initial = entries[0].id
     return ViewerServer(
-        (host, port), store, static_dir, max_upload_bytes, initial=initial, verbose=verbose
+        (host, port), store, static_dir, max_upload_bytes, initial=initial, verbose=verbose, limits=limits
     )
