@@ -241,7 +241,7 @@ def fade(gamma, gamma_max: float, extrapolation: str = "fade") -> np.ndarray:
     """Factor of the lobe beyond the table's last deviation (:data:`EXTRAPOLATIONS`):
     1 up to ``gamma_max``, then linear to 0 over :data:`FADE_DEG` (``fade``); 1 (``hold``).
 
-    >>> [float(v) for v in fade(np.radians([80.0, 87.0, 90.0]), np.radians(84.0))]
+    >>> [round(float(v), 12) for v in fade(np.radians([80.0, 87.0, 90.0]), np.radians(84.0))]
     [1.0, 0.5, 0.0]
     """
     gamma = np.asarray(gamma, float)
@@ -258,8 +258,8 @@ def line_foreshortening(gamma, line_sum: float, normalisation: str = "bounded") 
     There θ_{i,r} = (S ∓ |γ|)/2, so cos θ_i cos θ_r = (cos γ + cos S)/2 and the larger
     cosine is cos((S − |γ|)/2).
 
-    >>> round(float(line_foreshortening(0.0, np.pi / 2)), 12) == round(np.sqrt(0.5), 12)
-    True
+    >>> [round(float(w), 6) for w in line_foreshortening(np.radians([0.0, 84.0]), np.pi / 2)]
+    [0.707107, 0.499315]
     """
     gamma = np.abs(np.asarray(gamma, float))
     g = np.sqrt(np.clip((np.cos(gamma) + math.cos(line_sum)) / 2.0, 0.0, None))
