@@ -6,10 +6,11 @@ table of the lobe quantity
 .. math:: q(\phi, \gamma) = (f_r - c)\,w(\theta_i, \theta_r)
 
 (w the foreshortening weight, :func:`kesbrdf.mappings.foreshortening`: paper eq. 3's
-√(cos θ_i cos θ_r), bounded toward grazing angles; ``parameters["normalisation"]``) over the whole circle of deviation azimuths
-φ ∈ [0, 2π) and deviations γ ≥ 0, plus a Lambertian body term c (DESIGN §4).
-The table *is* the model: every consumer (numpy BRDF, Mitsuba plugin, browser
-viewer) evaluates it by the same bilinear lookup (``docs/formats.md``).
+√(cos θ_i cos θ_r), bounded toward grazing angles; ``parameters["normalisation"]``)
+over the whole circle of deviation azimuths φ ∈ [0, 2π) and deviations γ ≥ 0, plus a
+Lambertian body term c (DESIGN §4).  The table *is* the model: every consumer (numpy
+BRDF, Mitsuba plugin, browser viewer) evaluates it by the same bilinear lookup
+(``docs/formats.md``).
 
 How the table is filled
 -----------------------
@@ -198,8 +199,8 @@ class Model(ReflectanceModel):
             rho = self.lookup_unit(phi, np.abs(gamma))
             if self.normalisation != "sqrtcos":  # back to the measured (f − c)·√(cos θ_i cos θ_r)
                 g = np.abs(gamma)
-                rho *= (line_foreshortening(g, np.pi / 2, "sqrtcos")
-                        / line_foreshortening(g, np.pi / 2, self.normalisation))[:, None]
+                S = self.line_sum
+                rho *= (line_foreshortening(g, S, "sqrtcos") / line_foreshortening(g, S, self.normalisation))[:, None]
             rho += self.body * np.sqrt(np.maximum(np.cos(gamma), 0.0) * 0.5)[:, None]
             rho *= (inv_norm / sin_beta)[:, None]
             return rho
