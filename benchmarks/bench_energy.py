@@ -99,6 +99,48 @@ def _hemisphere_rmse() -> dict:
     return out
 
 
+def plugin_sample_weights(families=("ward", "sadeghi-silk-crepe"), theta_r_deg=(60.0, 89.0, 89.9, 89.99),
+                          n: int = 1 << 16, seed: int = 1) -> dict:
+    """Sample weights f·cos θ/pdf of the ``kesbrdf`` Mitsuba plugin (its own lobe sampling)
+    for a viewer at θ_r, on a ``kes`` fit of each family (paper protocol): the mean is the
+    white-furnace value a pixel converges to, the tail (max, share above 5× the mean) is
+    what shows as fireflies at 64 spp.  None without Mitsuba."""
+    try:
+        import drjit as dr
+        import mitsuba as mi
+
+        import kesbrdf.render  # noqa: F401  (variant, plugins)
+    except Exception:
+        return None
+    import tempfile
+    from pathlib import Path
+
+    import kesbrdf
+    from kesbrdf.gonio import measure
+
+    out = {}
+    rng = np.random.default_rng(seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        for fam in families:
+            model, _ = kesbrdf.fit(measure(_reference(fam)), kind="kes")
+            path = Path(tmp) / f"{fam}.kes.json"
+            model.save(path)
+            bsdf = mi.load_dict({"type": "kesbrdf", "filename": str(path)})
+            rows = {}
+            for th in theta_r_deg:
+                t = math.radians(th)
+                si = dr.zeros(mi.SurfaceInteraction3f, n)
+                si.wi = mi.Vector3f(np.full(n, math.sin(t)), np.zeros(n), np.full(n, math.cos(t)))
+                si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+                _, w = bsdf.sample(mi.BSDFContext(), si, mi.Float(rng.random(n)),
+                                   mi.Point2f(rng.random(n), rng.random(n)))
+                w = np.array(w).mean(axis=0)
+                rows[f"{th:g}"] = {"mean": round(float(w.mean()), 4), "max": float(f"{w.max():.3g}"),
+                                   "share_above_5x_mean": float(f"{np.mean(w > 5 * w.mean()):.3g}")}
+            out[fam] = rows
+    return out
+
+
 def _json_bound(b):
     return None if b is None else ("unbounded" if math.isinf(b) else round(b, 4))
 
@@ -137,6 +179,7 @@ def run() -> dict:
             }
     return {
         "hemisphere_rmse_kes": _hemisphere_rmse() if fixed else None,
+        "plugin_sample_weights": plugin_sample_weights(),
         "what": "directional albedo (max over phi_i = 0, 90 deg; channel mean) of each kind fitted to each "
                 "reference family, at theta_i_deg; quadrature kesbrdf.diagnostics.grazing_albedo",
         "code": "bounded foreshortening + fade" if fixed else "before the grazing-energy fix (sqrtcos, hold)",
