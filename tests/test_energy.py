@@ -3,7 +3,8 @@
 Before the fix, eq. 3's 1/√(cos θ_i cos θ_r) made a lobe's directional albedo grow as
 1/√cos θ_i (a ``kes`` fit of the Ward reference: 0.33 at normal incidence, 2.95 at
 89.99°), and the last γ column held up to γ = π put the in-plane grazing value on every
-back-scattering pair (a ``scattered`` fit of the Sadeghi silk crêpe: 1.39 at 89.99°).
+back-scattering pair (with only the first fixed, a ``scattered`` fit of the Sadeghi silk
+crêpe still reached 1.39 at 89.99°; with neither, 17.2).
 The full table is ``benchmarks/bench_energy.py`` (``results.json`` → ``energy``).
 """
 
