@@ -14,10 +14,14 @@ evaluates through :func:`kesbrdf.mappings.evaluate_pairs`.  For the ``kes`` kind
 
 For the first two,
 
-.. math:: f_r(\omega_i, \omega_r) = c + \frac{q(\phi, \gamma)}{\sqrt{\cos\theta_i\cos\theta_r}}
+.. math:: f_r(\omega_i, \omega_r) = c + \mathrm{fade}(\gamma)\,\frac{q(\phi, \gamma)}{w(\theta_i, \theta_r)}
 
 with q read from the table by bilinear interpolation (periodic in φ, γ clamped to the
-measured range).  Both are reciprocal by construction and return every in-plane
+measured range), w the foreshortening weight (paper eq. 3's √(cos θ_i cos θ_r), bounded
+toward grazing angles: :func:`kesbrdf.mappings.foreshortening`) and fade = 1 up to the
+last measured γ, then to 0 over 6° (:func:`kesbrdf.mappings.fade`); models written
+before the grazing-energy fix use √(cos θ_i cos θ_r) and hold the last column
+(docs/decisions.md, "Grazing energy").  Both are reciprocal by construction and return every in-plane
 input sample exactly.  The ``kes-halfdiff`` kind has the one mapping ``halfdiff``.
 
 Edges (:mod:`kesbrdf.mappings`): directions are normalised here (any non-zero

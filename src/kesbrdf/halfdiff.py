@@ -28,15 +28,22 @@ How the table is filled
 -----------------------
 1. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
    samples used (as :func:`kesbrdf.model.fit`), ``"none"`` is c = 0, a number sets c.
-2. Normalisation (``normalisation="sqrtcos"``, default): the table holds
-   q = (f_r − c)·w with w = √(cos θ_i cos θ_r), the paper's eq. 3 quantity used by the
-   ``"kes"`` kind too.  In-plane, w is a function of (θ_h, θ_d) alone, so this
-   changes nothing at the measured geometries; off the plane the evaluation divides
-   by the pair's own w, which keeps a lobe's 1/w growth toward grazing angles.
+2. Normalisation (``normalisation="bounded"``, default): the table holds
+   q = (f_r − c)·w with w the foreshortening weight of :func:`kesbrdf.mappings.foreshortening`,
+   max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)): the paper's eq. 3 quantity, as
+   the ``"kes"`` kind uses, bounded toward grazing angles so that the directional albedo
+   stays bounded at grazing incidence (docs/decisions.md, "Grazing energy").  In-plane,
+   w is a function of (θ_h, θ_d) alone, so this changes nothing at the measured
+   geometries; off the plane the evaluation divides by the pair's own w, which keeps a
+   lobe's 1/w growth toward grazing angles, up to 1/λ.  ``"sqrtcos"`` is eq. 3's
+   √(cos θ_i cos θ_r) unbounded (files written before ``bounded``, whose lobe albedo
+   grows as 1/√cos θ_i at grazing incidence).
    ``"none"`` (w = 1) tabulates f_r − c itself, as read literally from DESIGN §4.
    Measured on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90° and 45°, viewer to
    80°, dense 6° protocol): anisotropic Ward α = 0.15/0.3, RMSE 0.0012 ("sqrtcos")
-   vs 0.0015 ("none"); Ashikhmin–Shirley n = 10/100, 0.037 vs 0.033.
+   vs 0.0015 ("none"); Ashikhmin–Shirley n = 10/100, 0.037 vs 0.033 (measured before
+   ``bounded``, which differs from ``sqrtcos`` only where one cosine is below 1/4 of
+   the other).
 3. Resampling per slot: the lobe part (f_r − c)·w of the slot's samples, scattered
    over (θ_h, θ_d), is interpolated linearly (Delaunay,
    ``scipy.interpolate.LinearNDInterpolator``) onto a regular grid with the data's
@@ -79,9 +86,12 @@ no in-plane component, the azimuth of wr − wi, the plane of incidence, as
 :func:`kesbrdf.brdf.to_phi_gamma`); θ_h = angle(h, z); θ_d = angle(wi, h), computed
 as half the angle between wi and wr; then
 
-.. math:: f_r = c + \frac{T(\phi_h, \theta_h, \theta_d)}{\sqrt{\cos\theta_i\cos\theta_r}}
+.. math:: f_r = c + \frac{T(\phi_h, \theta_h, \theta_d)}{w(\theta_i, \theta_r)}
 
-with T read by trilinear interpolation (φ periodic, θ_h and θ_d clamped to the grid).
+(w of :func:`kesbrdf.mappings.foreshortening`, √(cos θ_i cos θ_r) away from grazing)
+with T read by trilinear interpolation (φ periodic, θ_h and θ_d clamped to the grid;
+beyond the last θ_h the lobe fades to 0 over :data:`kesbrdf.mappings.FADE_DEG` of
+γ = 2θ_h, ``parameters["extrapolation"] = "fade"``; files without it hold the last θ_h).
 (``normalisation="none"``: without the division).  Swapping wi and wr leaves h, θ_h
 and θ_d unchanged, so the model is reciprocal by construction (at h ∥ z the swap
 turns φ_h by π, and the table's θ_h = 0 row is π-periodic because both halves hold
@@ -104,7 +114,7 @@ from kesbrdf import kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.kinds import ReflectanceModel, register
-from kesbrdf.mappings import HALFDIFF, in_plane_half_diff, to_half_diff
+from kesbrdf.mappings import EXTRAPOLATIONS, HALFDIFF, fade, foreshortening, in_plane_half_diff, to_half_diff
 from kesbrdf.measurement import Measurement
 from kesbrdf.model import (
     FALLBACKS,
@@ -132,9 +142,10 @@ __all__ = [
 
 #: ``kind`` of the model file (docs/formats.md).
 KIND = "kes-halfdiff"
-#: What the table holds: ``"sqrtcos"`` q = (f − c)·√(cos θ_i cos θ_r) (default, paper
-#: eq. 3), ``"none"`` the lobe f − c itself.
-NORMALISATIONS = ("sqrtcos", "none")
+#: What the table holds: ``"bounded"`` q = (f − c)·w (default; w of
+#: :func:`kesbrdf.mappings.foreshortening`), ``"sqrtcos"`` q = (f − c)·√(cos θ_i cos θ_r)
+#: (paper eq. 3 unbounded; files without the parameter), ``"none"`` the lobe f − c itself.
+NORMALISATIONS = ("bounded", "sqrtcos", "none")
 #: θ_d is multiplied by this before the Delaunay triangulation (module docstring,
 #: step 3): < 1 makes the triangulation interpolate along θ_d at constant θ_h.
 THETA_D_SCALE = 0.5
@@ -194,8 +205,12 @@ class HalfDiffModel(ReflectanceModel):
     def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:
         phi_h, theta_h, theta_d = to_half_diff(wi, wr)
         q = lookup_halfdiff(self, phi_h, theta_h, theta_d)
-        if self.parameters.get("normalisation", "sqrtcos") == "sqrtcos":
-            q /= np.sqrt(wi[:, 2] * wr[:, 2])[:, None]
+        normalisation = self.parameters.get("normalisation", "sqrtcos")
+        if normalisation != "none":
+            q /= foreshortening(wi[:, 2], wr[:, 2], normalisation)[:, None]
+        extrapolation = self.parameters.get("extrapolation", "hold")
+        if extrapolation != "hold":  # in γ = 2θ_h, as the kes kind
+            q *= fade(2.0 * theta_h, 2.0 * float(self.theta_h_grid[-1]), extrapolation)[:, None]
         q += self.body
         return q
 
@@ -234,12 +249,12 @@ class HalfDiffModel(ReflectanceModel):
             )
         check_values(arr["table"], "table", source)
         check_values(arr["body"], "body", source)
-        normalisation = shared["parameters"].get("normalisation", "sqrtcos")
-        if normalisation not in NORMALISATIONS:
-            raise ModelError(
-                f"{where(source)}parameters.normalisation: expected one of {', '.join(NORMALISATIONS)}, "
-                f"got {str(normalisation)[:40]!r}"
-            )
+        for key, valid, default in (("normalisation", NORMALISATIONS, "sqrtcos"), ("extrapolation", EXTRAPOLATIONS, "hold")):
+            value = shared["parameters"].get(key, default)
+            if value not in valid:
+                raise ModelError(
+                    f"{where(source)}parameters.{key}: expected one of {', '.join(valid)}, got {str(value)[:40]!r}"
+                )
         return cls(**shared, **arr)
 
     @classmethod
@@ -393,7 +408,7 @@ def fit_halfdiff(
     noise_floor="auto",
     n_phi: int = DEFAULT_N_PHI,
     theta_step=None,
-    normalisation: str = "sqrtcos",
+    normalisation: str = "bounded",
 ) -> HalfDiffModel:
     """Build the ``kes-halfdiff`` model from in-plane samples at several θ_i.
 
@@ -415,7 +430,7 @@ def fit_halfdiff(
         φ cells, a multiple of 8.
     theta_step : float, optional
         (θ_h, θ_d) grid step, radians (default: the data's natural step).
-    normalisation : {"sqrtcos", "none"}
+    normalisation : {"bounded", "sqrtcos", "none"}
         What the table holds (:data:`NORMALISATIONS`, module docstring step 2).
 
     Raises
@@ -451,7 +466,7 @@ def fit_halfdiff(
     def weight(theta_i, theta_r):
         if normalisation == "none":
             return np.ones_like(np.asarray(theta_i, float))
-        return np.sqrt(np.clip(np.cos(theta_i) * np.cos(theta_r), 0.0, None))
+        return foreshortening(np.cos(theta_i), np.cos(theta_r), normalisation)
 
     # 2–3. regular (θ_h, θ_d) grid; per slot, the lobe part of q resampled onto it
     step, step_mode = _natural_step(np.concatenate([theta_h, theta_d]), theta_step)
@@ -574,6 +589,7 @@ def fit_halfdiff(
             "body": body_mode if body_mode != "value" else c.tolist(),
             "noise_floor": noise_floor if isinstance(noise_floor, str) else floor.tolist(),
             "normalisation": normalisation,
+            "extrapolation": "fade",
             "theta_interpolation": "linear",
             "theta_d_scale": THETA_D_SCALE,
             "n_phi": int(n_phi),
@@ -622,9 +638,9 @@ def lookup_halfdiff(model: HalfDiffModel, phi_h, theta_h, theta_d) -> np.ndarray
 def evaluate_halfdiff(model: HalfDiffModel, wi, wr) -> np.ndarray:
     """f_r(wi, wr) of a ``kes-halfdiff`` model in 1/sr, shape broadcast(wi, wr)[:-1] + (C,).
 
-    .. math:: f_r = c + T(\\phi_h, \\theta_h, \\theta_d) / \\sqrt{\\cos\\theta_i\\cos\\theta_r}
+    .. math:: f_r = c + T(\\phi_h, \\theta_h, \\theta_d) / w(\\theta_i, \\theta_r)
 
-    (without the square root for ``normalisation="none"``).  Zero when either
+    (w of :func:`kesbrdf.mappings.foreshortening`; w = 1 for ``normalisation="none"``).  Zero when either
     direction is at or below the horizon; NaN in gives NaN out
     (:func:`kesbrdf.mappings.evaluate_pairs`).  Same as ``model.evaluate(wi, wr)``.
 

@@ -17,6 +17,24 @@ Mappings
     (φ_h, θ_h, θ_d): half-vector azimuth, half angle and difference angle
     (:func:`to_half_diff`), used by the ``kes-halfdiff`` kind.
 
+Foreshortening normalisation
+----------------------------
+Every tabulated kind stores a lobe quantity q = (f_r − c)·w and evaluates
+f_r = c + q/w, with w the *foreshortening weight* of the pair (:func:`foreshortening`):
+
+``bounded`` (default of new fits)
+    w = max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)), λ = :data:`BOUNDED_LAMBDA`.
+``sqrtcos``
+    w = √(cos θ_i cos θ_r), paper eq. 3 read literally (files written before the
+    bounded form, and the ``paper`` mapping).
+
+Eq. 3's 1/√(cos θ_i cos θ_r) lets a lobe's directional albedo grow as
+1/√cos θ_i toward grazing incidence (3× at 89.99° on a Ward fit, docs/decisions.md).
+The bounded form equals it wherever the two cosines are within a factor 1/λ² = 4 of
+each other and is the Ashikhmin–Shirley/Neumann 1/max(cos θ_i, cos θ_r) (over λ)
+elsewhere, so (f_r − c) cos θ_r ≤ q/λ and the albedo is at most πc + (1/λ)∫q dω_r at
+every incidence.  It is symmetric in (θ_i, θ_r): reciprocity is kept.
+
 Where wi + wr has no component in the fabric plane (the mirror direction for
 ``deviation``, h ∥ z for the half-vector mappings), φ is the azimuth of the plane of
 incidence, (wr − wi) projected (DESIGN §4).
@@ -47,6 +65,13 @@ from kesbrdf.errors import KesbrdfError
 __all__ = [
     "MAPPINGS",
     "HALFDIFF",
+    "NORMALISATIONS",
+    "BOUNDED_LAMBDA",
+    "EXTRAPOLATIONS",
+    "FADE_DEG",
+    "fade",
+    "foreshortening",
+    "line_foreshortening",
     "AZIMUTH_EPS",
     "PAPER_MIN_SIN_BETA",
     "COS_EPS",
@@ -65,6 +90,25 @@ __all__ = [
 MAPPINGS = ("deviation", "halfvector", "paper")
 #: The mapping of the ``kes-halfdiff`` kind.
 HALFDIFF = "halfdiff"
+
+#: Foreshortening normalisations (module docstring; first = default of new fits).
+NORMALISATIONS = ("bounded", "sqrtcos")
+#: λ of the ``bounded`` normalisation: the paper's √(cos θ_i cos θ_r) is kept while
+#: min/max of the two cosines is at least λ² = 1/4 (on the paper's line θ_i + θ_r = 90°
+#: up to |γ| ≈ 62°, θ_r ≈ 76°); beyond, the lobe's projected value f_r cos θ is held
+#: below q/λ, so the grazing albedo can reach at most ~2× the lobe's ∫q dω
+#: (docs/decisions.md, "Grazing energy").
+BOUNDED_LAMBDA = 0.5
+#: What a table's lobe does beyond its last deviation (γ_max, or θ_h,max of the
+#: ``kes-halfdiff`` kind), ``parameters["extrapolation"]``: ``fade`` (new fits) scales it
+#: by max(0, 1 − (γ − γ_max)/FADE_DEG), ``hold`` (files written before) keeps the last
+#: column up to γ = π.  Held, the in-plane grazing value (θ_i = 3°, θ_r = 87° in the
+#: paper protocol) lands on every back-scattering pair, whose solid angle grows toward
+#: grazing incidence: it alone lifts the grazing albedo of a bright fabric above 1
+#: (docs/decisions.md, "Grazing energy").
+EXTRAPOLATIONS = ("fade", "hold")
+#: Width of the ``fade``, degrees of γ (one deviation step of the paper's protocol).
+FADE_DEG = 6.0
 
 #: Projected lengths below this count as zero when taking an azimuth.
 AZIMUTH_EPS = 1e-12
@@ -170,6 +214,61 @@ def paper_phi_gamma(theta_i, phi_i, theta_r, phi_r):
     half = 0.5 * np.sqrt(np.sin(phi_r - phi_i - np.pi) ** 2 + np.cos(theta_r) ** 2)
     beta = 2.0 * np.arcsin(np.clip(half, 0.0, 1.0))
     return phi, gamma, np.maximum(np.sin(beta), PAPER_MIN_SIN_BETA)
+
+
+def foreshortening(cos_i, cos_r, normalisation: str = "bounded") -> np.ndarray:
+    r"""Foreshortening weight w of f_r = c + q/w (module docstring), ≥ 0.
+
+    .. math:: w = \max\bigl(\sqrt{\cos\theta_i\cos\theta_r},\;
+              \lambda\max(\cos\theta_i, \cos\theta_r)\bigr)
+
+    (``bounded``), or √(cos θ_i cos θ_r) (``sqrtcos``); cosines below 0 count as 0.
+
+    >>> float(foreshortening(0.5, 0.5)), float(foreshortening(1e-4, 1.0)), float(foreshortening(1e-4, 1.0, "sqrtcos"))
+    (0.5, 0.5, 0.01)
+    """
+    ci = np.maximum(np.asarray(cos_i, float), 0.0)
+    cr = np.maximum(np.asarray(cos_r, float), 0.0)
+    g = np.sqrt(ci * cr)
+    if normalisation == "sqrtcos":
+        return g
+    if normalisation != "bounded":
+        raise KesbrdfError(f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}")
+    return np.maximum(g, BOUNDED_LAMBDA * np.maximum(ci, cr))
+
+
+def fade(gamma, gamma_max: float, extrapolation: str = "fade") -> np.ndarray:
+    """Factor of the lobe beyond the table's last deviation (:data:`EXTRAPOLATIONS`):
+    1 up to ``gamma_max``, then linear to 0 over :data:`FADE_DEG` (``fade``); 1 (``hold``).
+
+    >>> [round(float(v), 12) for v in fade(np.radians([80.0, 87.0, 90.0]), np.radians(84.0))]
+    [1.0, 0.5, 0.0]
+    """
+    gamma = np.asarray(gamma, float)
+    if extrapolation == "hold":
+        return np.ones_like(gamma)
+    if extrapolation != "fade":
+        raise KesbrdfError(f"unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}")
+    return np.clip(1.0 - (gamma - gamma_max) * (1.0 / math.radians(FADE_DEG)), 0.0, 1.0)
+
+
+def line_foreshortening(gamma, line_sum: float, normalisation: str = "bounded") -> np.ndarray:
+    """:func:`foreshortening` on the in-plane line θ_i + θ_r = S at deviation |γ|.
+
+    There θ_{i,r} = (S ∓ |γ|)/2, so cos θ_i cos θ_r = (cos γ + cos S)/2 and the larger
+    cosine is cos((S − |γ|)/2).
+
+    >>> [round(float(w), 6) for w in line_foreshortening(np.radians([0.0, 84.0]), np.pi / 2)]
+    [0.707107, 0.499315]
+    """
+    gamma = np.abs(np.asarray(gamma, float))
+    g = np.sqrt(np.clip((np.cos(gamma) + math.cos(line_sum)) / 2.0, 0.0, None))
+    if normalisation == "sqrtcos":
+        return g
+    if normalisation != "bounded":
+        raise KesbrdfError(f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}")
+    cos_hi = np.cos(np.clip((line_sum - gamma) / 2.0, 0.0, np.pi / 2))
+    return np.maximum(g, BOUNDED_LAMBDA * cos_hi)
 
 
 def in_plane_half_diff(theta_i, theta_r):

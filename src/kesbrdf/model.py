@@ -3,12 +3,14 @@ r"""The anisotropic reflection model: the table ρ(φ, γ) (paper STEP 3, DESIGN
 :func:`fit` turns in-plane measurements at ψ = 0, π/4, π/2 (and 3π/4) into a
 table of the lobe quantity
 
-.. math:: q(\phi, \gamma) = (f_r - c)\,\sqrt{\cos\theta_i\cos\theta_r}
+.. math:: q(\phi, \gamma) = (f_r - c)\,w(\theta_i, \theta_r)
 
-(paper eq. 3's normalisation) over the whole circle of deviation azimuths
-φ ∈ [0, 2π) and deviations γ ≥ 0, plus a Lambertian body term c (DESIGN §4).
-The table *is* the model: every consumer (numpy BRDF, Mitsuba plugin, browser
-viewer) evaluates it by the same bilinear lookup (``docs/formats.md``).
+(w the foreshortening weight, :func:`kesbrdf.mappings.foreshortening`: paper eq. 3's
+√(cos θ_i cos θ_r), bounded toward grazing angles; ``parameters["normalisation"]``)
+over the whole circle of deviation azimuths φ ∈ [0, 2π) and deviations γ ≥ 0, plus a
+Lambertian body term c (DESIGN §4).  The table *is* the model: every consumer (numpy
+BRDF, Mitsuba plugin, browser viewer) evaluates it by the same bilinear lookup
+(``docs/formats.md``).
 
 How the table is filled
 -----------------------
@@ -49,7 +51,16 @@ from kesbrdf import kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.kinds import ReflectanceModel, register
-from kesbrdf.mappings import MAPPINGS, PAPER_MIN_SIN_BETA, to_phi_gamma
+from kesbrdf.mappings import (
+    EXTRAPOLATIONS,
+    MAPPINGS,
+    NORMALISATIONS,
+    PAPER_MIN_SIN_BETA,
+    fade,
+    foreshortening,
+    line_foreshortening,
+    to_phi_gamma,
+)
 from kesbrdf.measurement import Measurement
 
 __all__ = [
@@ -111,6 +122,7 @@ class Model(ReflectanceModel):
     array_names: ClassVar[tuple[str, ...]] = _ARRAYS
     fit_options: ClassVar[tuple[str, ...]] = (
         "orientations", "fallback", "body", "noise_floor", "interpolation", "n_phi", "gamma_step",
+        "normalisation", "extrapolation",
     )
 
     channels: tuple[str, ...]
@@ -134,6 +146,27 @@ class Model(ReflectanceModel):
         return int(self.parameters.get("orientations", 4))
 
     @property
+    def normalisation(self) -> str:
+        """What the table holds, :data:`kesbrdf.mappings.NORMALISATIONS`: ``bounded``, or
+        ``sqrtcos`` for files written before it (their tables were fitted so)."""
+        return str(self.parameters.get("normalisation", "sqrtcos"))
+
+    @property
+    def extrapolation(self) -> str:
+        """The lobe beyond γ_max, :data:`kesbrdf.mappings.EXTRAPOLATIONS`: ``fade``, or
+        ``hold`` for files written before it."""
+        return str(self.parameters.get("extrapolation", "hold"))
+
+    @property
+    def line_sum(self) -> float:
+        """θ_i + θ_r of the incidence line the table was fitted on, radians (90° by default)."""
+        value = self.diagnostics.get("incidence_line_deg", self.parameters.get("incidence_line_deg", 90.0))
+        try:
+            return math.radians(float(value))
+        except (TypeError, ValueError):
+            return math.pi / 2
+
+    @property
     def sample_frame_warp(self) -> float:
         """Sample-frame azimuth of the warp, radians (scattered fits; 0 otherwise)."""
         try:
@@ -146,8 +179,8 @@ class Model(ReflectanceModel):
         """f_r of unit rows above the horizon (kinds contract), shape (n, C)."""
         cos_theta_i = wi[:, 2]
         cos_theta_r = wr[:, 2]
-        inv_norm = 1.0 / np.sqrt(cos_theta_i * cos_theta_r)
         if mapping == "paper":
+            inv_norm = 1.0 / np.sqrt(cos_theta_i * cos_theta_r)
             # eq. 3–4 as paper_phi_gamma, with sin β = 2h√(1 − h²) for β = 2 arcsin h
             # and cos θ_r taken from the vector (same values, fewer transcendental calls)
             theta_i = np.arccos(np.minimum(cos_theta_i, 1.0))
@@ -164,12 +197,19 @@ class Model(ReflectanceModel):
             # ρ_KES is the measured quantity q on the paper's θ_i + θ_r = 90° line,
             # body included: c·√(cos θ_i cos θ_r) = c·√(cos γ / 2) there.
             rho = self.lookup_unit(phi, np.abs(gamma))
+            if self.normalisation != "sqrtcos":  # back to the measured (f − c)·√(cos θ_i cos θ_r)
+                g = np.abs(gamma)
+                S = self.line_sum
+                rho *= (line_foreshortening(g, S, "sqrtcos") / line_foreshortening(g, S, self.normalisation))[:, None]
             rho += self.body * np.sqrt(np.maximum(np.cos(gamma), 0.0) * 0.5)[:, None]
             rho *= (inv_norm / sin_beta)[:, None]
             return rho
         phi, gamma = to_phi_gamma(wi, wr, mapping)
         q = self.lookup_unit(phi, gamma)
-        q *= inv_norm[:, None]
+        scale = 1.0 / foreshortening(cos_theta_i, cos_theta_r, self.normalisation)
+        if self.extrapolation != "hold":
+            scale *= fade(gamma, self.gamma_max, self.extrapolation)
+        q *= scale[:, None]
         q += self.body
         return q
 
@@ -262,6 +302,13 @@ class Model(ReflectanceModel):
             )
         check_values(table, "table", source)
         check_values(body, "body", source)
+        params = shared.get("parameters") or {}
+        for key, valid, default in (("normalisation", NORMALISATIONS, "sqrtcos"), ("extrapolation", EXTRAPOLATIONS, "hold")):
+            value = params.get(key, default)
+            if value not in valid:
+                raise ModelError(
+                    f"{where(source)}parameters.{key}: expected one of {', '.join(valid)}, got {str(value)[:40]!r}"
+                )
         nodes, q_nodes = arr["gamma_nodes"], arr["q_nodes"]
         if nodes.ndim != 1 or q_nodes.shape != (nodes.size, 8, C) or not np.all(np.isfinite(nodes)):
             raise ModelError(
@@ -451,9 +498,10 @@ def _merge_close(values, tol: float = 1e-12) -> np.ndarray:
     return v[keep]
 
 
-def line_weight(gamma, line_sum: float) -> np.ndarray:
-    """√(cos θ_i cos θ_r) on the line θ_i + θ_r = S at deviation γ: √((cos γ + cos S)/2)."""
-    return np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2.0, 0.0, None))
+def line_weight(gamma, line_sum: float, normalisation: str = "sqrtcos") -> np.ndarray:
+    """Foreshortening weight on the line θ_i + θ_r = S at deviation γ
+    (:func:`kesbrdf.mappings.line_foreshortening`); ``sqrtcos``: √((cos γ + cos S)/2)."""
+    return line_foreshortening(gamma, line_sum, normalisation)
 
 
 def fit(
@@ -465,6 +513,8 @@ def fit(
     interpolation: str = "kes",
     n_phi: int = DEFAULT_N_PHI,
     gamma_step=None,
+    normalisation: str = "bounded",
+    extrapolation: str = "fade",
 ) -> Model:
     """Build the extended-KES model from in-plane measurements.
 
@@ -489,6 +539,11 @@ def fit(
         the grid).
     gamma_step : float, optional
         γ step of the table, radians (default: the measured spacing, at most 1°).
+    normalisation : {"bounded", "sqrtcos"}
+        Foreshortening weight w of q = (f − c)·w (:func:`kesbrdf.mappings.foreshortening`);
+        ``sqrtcos`` is eq. 3 literally, whose lobe gains energy toward grazing incidence.
+    extrapolation : {"fade", "hold"}
+        The lobe beyond the last measured deviation (:data:`kesbrdf.mappings.EXTRAPOLATIONS`).
 
     Returns
     -------
@@ -502,6 +557,10 @@ def fit(
         )
     if not (isinstance(n_phi, (int, np.integer)) and not isinstance(n_phi, bool) and 0 < n_phi and n_phi % 8 == 0):
         raise KESError(f"expected n_phi to be a positive multiple of 8, got {n_phi!r}")
+    if normalisation not in NORMALISATIONS:
+        raise KESError(f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}")
+    if extrapolation not in EXTRAPOLATIONS:
+        raise KESError(f"unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}")
     orientations, psis, at, line_sum = _kes_rows(m, orientations)
     C = m.n_channels
 
@@ -547,7 +606,7 @@ def fit(
     q_half_nodes = np.full((gamma_nodes.size, 8, C), np.nan)
     for slot in slots:
         g, f = curves[slot]
-        q = f * line_weight(g, line_sum)[:, None]
+        q = f * line_weight(g, line_sum, normalisation)[:, None]
         for ch in range(C):
             q_half_nodes[:, slot, ch] = np.interp(gamma_nodes, g, q[:, ch])
 
@@ -580,12 +639,12 @@ def fit(
     # 5. interpolate over φ at every γ, then split off the body: lobe = q − c·w(γ)
     phi_grid = np.arange(n_phi) * (2 * np.pi / n_phi)
     table, fallback_gamma = fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback)
-    body_q = c[None, None, :] * line_weight(gamma_grid, line_sum)[None, :, None]
+    body_q = c[None, None, :] * line_weight(gamma_grid, line_sum, normalisation)[None, :, None]
     lobe = table - body_q
     clamped = int(np.count_nonzero(lobe < -1e-12 * np.abs(table)))
     table = np.maximum(lobe, 0.0)
     q_total_nodes = q_half_nodes
-    q_half_nodes = q_half_nodes - c[None, None, :] * line_weight(gamma_nodes, line_sum)[:, None, None]
+    q_half_nodes = q_half_nodes - c[None, None, :] * line_weight(gamma_nodes, line_sum, normalisation)[:, None, None]
 
     fallback_deg = [round(float(np.degrees(gamma_grid[i])), 6) for i in fallback_gamma]
     diagnostics = {
@@ -616,6 +675,8 @@ def fit(
             "interpolation": interpolation,
             "gamma_interpolation": "linear",
             "n_phi": n_phi,
+            "normalisation": normalisation,
+            "extrapolation": extrapolation,
         },
         diagnostics=diagnostics,
         input_info=m.input_info(),

@@ -282,7 +282,9 @@ def ratio_table(rm: Measurement):
     """KES table of a ratio measurement (module docstring)."""
     from kesbrdf.model import fit as kes_fit
 
-    km = kes_fit(rm, body="none", fallback="log", noise_floor=1e-12)
+    # the ratio is dimensionless and is not divided by any foreshortening at evaluation:
+    # the line weight only passes through the table and is divided out again (sqrtcos)
+    km = kes_fit(rm, body="none", fallback="log", noise_floor=1e-12, normalisation="sqrtcos")
     line_sum = math.radians(km.diagnostics["incidence_line_deg"])
     return SimpleNamespace(phi_grid=km.phi_grid, gamma_grid=km.gamma_grid, table=km.table,
                            line_sum=line_sum, gamma_max=float(km.gamma_grid[-1]))

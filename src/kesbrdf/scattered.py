@@ -16,15 +16,17 @@ plus a Lambertian body c ≥ 0.  The table is then built exactly as
 :func:`kesbrdf.model.fit` builds it from in-plane data on the paper's line
 θ_i + θ_r = π/2:
 
-1. total half-samples q_{n,s} = ℓ_{n,s} + c·w(γ_n), w(γ) = √(cos γ / 2) the line's
-   √(cos θ_i cos θ_r) (zero beyond γ = π/2);
+1. total half-samples q_{n,s} = ℓ_{n,s} + c·w(γ_n), w(γ) the line's foreshortening
+   weight (:func:`kesbrdf.mappings.line_foreshortening`: √(cos γ / 2), bounded toward
+   grazing angles; zero beyond γ = π/2);
 2. linear interpolation in q onto the table's uniform γ grid;
 3. KES on K = 1/q over the whole circle of deviation azimuths
    (:func:`kesbrdf.kes.interpolate_circle`, through ``kesbrdf.model._fill_table`` with
    ``fallback="log"`` where K(φ) ≤ 0);
 4. body split: lobe = max(q(φ, γ) − c·w(γ), 0).
 
-So f_r = c + lobe(φ, γ)/√(cos θ_i cos θ_r) (``deviation`` mapping) is positive and
+So f_r = c + lobe(φ, γ)/w(θ_i, θ_r) (``deviation`` mapping, w of
+:func:`kesbrdf.mappings.foreshortening`) is positive and
 finite everywhere, and reciprocal by construction.
 
 Symmetric variants (``symmetry``): ``"none"`` (8 free half-azimuths: pile/nap allowed),
@@ -93,7 +95,7 @@ import numpy as np
 from kesbrdf import kes
 from kesbrdf.errors import KesbrdfError, MeasurementError
 from kesbrdf.kinds import register_fitter
-from kesbrdf.mappings import to_phi_gamma
+from kesbrdf.mappings import foreshortening, to_phi_gamma
 from kesbrdf.measurement import Measurement
 from kesbrdf.model import Model, fallback_warning, fill_table, line_weight
 
@@ -127,6 +129,9 @@ N_PHI = 360
 LOG_EPS_REL = 1e-3
 #: The paper's incidence line θ_i + θ_r = π/2: the virtual in-plane samples live on it.
 LINE_SUM = math.pi / 2
+#: Foreshortening weight of the table (:func:`kesbrdf.mappings.foreshortening`), as
+#: :func:`kesbrdf.model.fit`'s default.
+NORMALISATION = "bounded"
 
 #: Default hyper-parameters, one set for every fabric, chosen on simulated Ward lobes
 #: at the CUReT geometries (5 % noise, 5 folds, grid 0…0.1 × 0…0.3; best for the
@@ -247,8 +252,8 @@ class _Problem:
         self.a0 = np.searchsorted(self.J, j0)
         self.a1 = np.searchsorted(self.J, j1)
         self.P = _hat_matrix(gamma_grid[self.J], gamma_nodes)  # (|J|, n_nodes)
-        self.w_nodes = line_weight(gamma_nodes, LINE_SUM)
-        self.w_J = line_weight(gamma_grid[self.J], LINE_SUM)
+        self.w_nodes = line_weight(gamma_nodes, LINE_SUM, NORMALISATION)
+        self.w_J = line_weight(gamma_grid[self.J], LINE_SUM, NORMALISATION)
         self.Pw = self.P @ self.w_nodes
         # K(φ) = Σ_s K_half[s]·B[s, φ] (the KES interpolation is linear in K)
         self.B = kes.interpolate_circle(np.eye(8), self.phi_grid)  # (8, n_phi)
@@ -300,7 +305,7 @@ class _Problem:
         q_half = P @ (np.exp(theta) + c * self.w_nodes[:, None])  # (cols, 8)
         T, fallback = fill_table(q_half[:, :, None], self.phi_grid, self.gamma_grid[columns], 4, "kes", "log")
         T = T[:, :, 0].T  # (cols, n_phi), total q
-        lobe = T - c * line_weight(self.gamma_grid[columns], LINE_SUM)[:, None]
+        lobe = T - c * line_weight(self.gamma_grid[columns], LINE_SUM, NORMALISATION)[:, None]
         return np.maximum(lobe, 0.0), T, q_half, fallback
 
     def predict(self, theta, c):
@@ -475,7 +480,7 @@ def fit_scattered(
     usable = (wi[:, 2] > 0) & (wr[:, 2] > 0) & np.all(np.isfinite(m.values), axis=1)
     n_used = int(usable.sum())
     phi_s, gamma = to_phi_gamma(wi[usable], wr[usable], mapping)
-    norm = np.sqrt(wi[usable, 2] * wr[usable, 2])
+    norm = foreshortening(wi[usable, 2], wr[usable, 2], NORMALISATION)
     values = m.values[usable]
     gap = _azimuth_gap(phi_s, gamma)
     symmetry_asked = symmetry
@@ -590,7 +595,7 @@ def fit_scattered(
         lobe, T, _, fallback = p.table_columns(theta_all[:, :, ch], bodies[ch], all_cols)
         tables.append(lobe.T)
         fallback_gamma.update(int(i) for i in fallback)
-        clamped += int(np.count_nonzero(T - bodies[ch] * line_weight(gamma_grid, LINE_SUM)[:, None] < 0))
+        clamped += int(np.count_nonzero(T - bodies[ch] * line_weight(gamma_grid, LINE_SUM, NORMALISATION)[:, None] < 0))
     table = np.stack(tables, axis=-1)
     body_arr = np.asarray(bodies, float)
     if not (np.all(np.isfinite(table)) and np.all(table >= 0) and np.all(np.isfinite(body_arr))):
@@ -613,6 +618,8 @@ def fit_scattered(
             "interpolation": "kes",
             "gamma_interpolation": "linear",
             "n_phi": N_PHI,
+            "normalisation": NORMALISATION,
+            "extrapolation": "fade",
             "fit": "scattered",
             "symmetry": symmetry,
             "symmetry_requested": symmetry_asked,

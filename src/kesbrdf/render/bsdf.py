@@ -5,9 +5,11 @@ Dr.Jit (single precision), so it agrees with :func:`kesbrdf.brdf.evaluate`:
 
 .. math::
 
-    f_r(\omega_i, \omega_r) = c + t\,\frac{q(\phi, \gamma)}{\sqrt{\cos\theta_i\cos\theta_r}}
+    f_r(\omega_i, \omega_r) = c + t\,\frac{q(\phi, \gamma)}{w(\theta_i, \theta_r)}
 
-with (φ, γ) from the ``deviation`` or ``halfvector`` mapping (DESIGN §4), q read by
+with w the model's foreshortening weight (:func:`foreshortening`, the Dr.Jit twin of
+:func:`kesbrdf.mappings.foreshortening`: √(cos θ_i cos θ_r), bounded toward grazing
+angles for models with ``normalisation="bounded"``), (φ, γ) from the ``deviation`` or ``halfvector`` mapping (DESIGN §4), q read by
 bilinear lookup (φ periodic, γ clamped to the measured range; a ``mi.Texture2f``
 whose first φ row is repeated after the last, so clamping equals periodic
 wrapping), c the body term and t the lobe tint.
@@ -43,8 +45,9 @@ sampling : str
     (cosine-weighted only; a baseline for the benchmark).
 extrapolation : str
     What the lobe does beyond the last measured deviation γ_max (84° in the paper's
-    protocol).  ``hold`` (default) keeps the last column, exactly as
-    :func:`kesbrdf.brdf.evaluate` and ``docs/formats.md``; ``fade`` scales it by
+    protocol); default: the model's own ``parameters["extrapolation"]``, as
+    :func:`kesbrdf.brdf.evaluate` and ``docs/formats.md`` (``fade`` for new fits, ``hold``
+    for files written before).  ``hold`` keeps the last column; ``fade`` scales it by
     max(0, 1 − (γ − γ_max)/Δ) with Δ = :data:`FADE_DEG` (one deviation step of the
     paper's protocol), so pairs the measurement never came near get the body only.
     Holding the column puts the in-plane grazing value (θ_i = 3°, θ_r = 87°) on every
@@ -66,17 +69,16 @@ import mitsuba as mi
 
 from kesbrdf.errors import ModelError, validate_choice, where
 from kesbrdf.kinds import require_kind
+from kesbrdf.mappings import BOUNDED_LAMBDA, FADE_DEG  # noqa: F401  (FADE_DEG re-exported)
 from kesbrdf.render import sampling as _sampling
 
-__all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model", "PLUGINS"]
+__all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "foreshortening", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model", "PLUGINS"]
 
 MAPPINGS = ("deviation", "halfvector")
 #: Model kinds the plugin evaluates (the ``kes`` table).
 SUPPORTED_KINDS = ("kes",)
 SAMPLINGS = ("lobe", "cosine")
 EXTRAPOLATIONS = ("hold", "fade")
-#: Width of the fade beyond γ_max of ``extrapolation="fade"``, degrees.
-FADE_DEG = 6.0
 #: Projected length below which the azimuth falls back to the plane of incidence
 #: (float32 counterpart of kesbrdf.brdf.AZIMUTH_EPS).
 AZIMUTH_EPS = 1e-7
@@ -162,6 +164,16 @@ def phi_gamma(wi, wr, mapping: str = "deviation"):
     phi = dr.atan2(y, x)
     phi = dr.select(phi < 0.0, phi + 2.0 * math.pi, phi)
     return phi, gamma
+
+
+def foreshortening(cos_i, cos_r, normalisation: str = "bounded"):
+    """Foreshortening weight w of f_r = c + q/w in Dr.Jit, as
+    :func:`kesbrdf.mappings.foreshortening` (``bounded`` or ``sqrtcos``); callers mask
+    pairs below the horizon."""
+    g = dr.sqrt(dr.maximum(cos_i * cos_r, 1e-20))
+    if normalisation == "sqrtcos":
+        return g
+    return dr.maximum(g, BOUNDED_LAMBDA * dr.maximum(cos_i, cos_r))
 
 
 class KesTable:
@@ -309,7 +321,8 @@ class KesBSDF(FabricBSDF):
         sampling = str(_prop(props, "sampling", "lobe"))
         validate_choice("kesbrdf BSDF sampling", sampling, SAMPLINGS, error=ModelError)
         self.two_sided = bool(_prop(props, "two_sided", False))
-        extrapolation = str(_prop(props, "extrapolation", "hold"))
+        # default: the model's own (fade for fits since the grazing-energy fix, hold before)
+        extrapolation = str(_prop(props, "extrapolation", model.extrapolation))
         if extrapolation not in EXTRAPOLATIONS:
             raise ModelError(
                 f"kesbrdf BSDF: unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}"
@@ -329,6 +342,7 @@ class KesBSDF(FabricBSDF):
         table = np.clip(np.nan_to_num(table * tint), 0.0, None)
 
         self.table = KesTable(table, model.gamma_grid)
+        self.normalisation = model.normalisation
         self.gamma_max = self.table.gamma_max
         self.body = mi.Color3f(*[float(b) for b in body])
 
@@ -355,8 +369,7 @@ class KesBSDF(FabricBSDF):
         above = (cos_i > 0.0) & (cos_r > 0.0) & active
         phi, gamma = self._phi_gamma(wi, wr)
         q = self.lobe_q(phi, gamma)
-        norm = dr.rsqrt(dr.maximum(cos_i * cos_r, 1e-20))
-        f = self.body + q * norm
+        f = self.body + q / foreshortening(cos_i, cos_r, self.normalisation)
         return dr.select(above, f, 0.0)
 
     def to_string(self):

@@ -4,9 +4,10 @@ Evaluation is :func:`kesbrdf.halfdiff.evaluate_halfdiff` in Dr.Jit (single preci
 
 .. math::
 
-    f_r(\omega_i, \omega_r) = c + \frac{T(\phi_h, \theta_h, \theta_d)}{\sqrt{\cos\theta_i\cos\theta_r}}
+    f_r(\omega_i, \omega_r) = c + \frac{T(\phi_h, \theta_h, \theta_d)}{w(\theta_i, \theta_r)}
 
-(no square root for models with ``normalisation="none"``), with h = ω_i + ω_r, φ_h its
+(w the model's foreshortening weight, :func:`kesbrdf.render.bsdf.foreshortening`;
+no division for models with ``normalisation="none"``), with h = ω_i + ω_r, φ_h its
 azimuth (the plane of incidence ω_r − ω_i where h ∥ z), θ_h = angle(h, z),
 θ_d = half the angle between ω_i and ω_r, and T read by trilinear lookup (φ periodic
 through a repeated first φ slice, θ_h and θ_d clamped to their grids), from a
@@ -16,8 +17,9 @@ Frames and colour as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp;
 ``si.wi`` is the viewer ω_r, ``wo`` the light ω_i; ``base_color`` replaces the body by
 base_color/π, ``lobe_tint`` multiplies T.
 
-``extrapolation``: ``hold`` (default, as :func:`~kesbrdf.halfdiff.evaluate_halfdiff`)
-keeps the table at the last measured θ_h; ``fade`` scales the lobe by
+``extrapolation``: default the model's own ``parameters["extrapolation"]``, as
+:func:`~kesbrdf.halfdiff.evaluate_halfdiff` (``fade`` for new fits, ``hold`` before).
+``hold`` keeps the table at the last measured θ_h; ``fade`` scales the lobe by
 max(0, 1 − (θ_h − θ_h,max)/(Δ/2)), Δ = :data:`kesbrdf.render.bsdf.FADE_DEG` (the same
 fade as the ``kesbrdf`` plugin's, in γ = 2θ_h).
 
@@ -36,7 +38,7 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
-from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, parse_rgb
+from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, foreshortening, parse_rgb
 
 __all__ = ["HalfDiffBSDF", "HalfDiffTable", "half_diff", "register", "check_halfdiff_model"]
 
@@ -123,9 +125,9 @@ class HalfDiffBSDF(FabricBSDF):
                 raise ModelError(f"base_color: expected a body albedo with R,G,B in [0, 1], got {base!r}")
             body = albedo / math.pi
         table = np.clip(np.nan_to_num(table * tint), 0.0, None)
-        self.sqrtcos = model.parameters.get("normalisation", "sqrtcos") == "sqrtcos"
+        self.normalisation = str(model.parameters.get("normalisation", "sqrtcos"))
         self.two_sided = bool(_prop(props, "two_sided", False))
-        self.extrapolation = str(_prop(props, "extrapolation", "hold"))
+        self.extrapolation = str(_prop(props, "extrapolation", model.parameters.get("extrapolation", "hold")))
         if self.extrapolation not in EXTRAPOLATIONS:
             raise ModelError(
                 f"kesbrdf_halfdiff BSDF: unknown extrapolation {self.extrapolation!r}; "
@@ -149,8 +151,8 @@ class HalfDiffBSDF(FabricBSDF):
         q = self.table(phi, theta_h, theta_d)
         if self.extrapolation == "fade":
             q = q * dr.clip(1.0 - (theta_h - self.h_max) * (2.0 / math.radians(FADE_DEG)), 0.0, 1.0)
-        if self.sqrtcos:
-            q = q * dr.rsqrt(dr.maximum(wi.z * wr.z, 1e-20))
+        if self.normalisation != "none":
+            q = q / foreshortening(wi.z, wr.z, self.normalisation)
         return dr.select(above, self.body + q, 0.0)
 
     def to_string(self):

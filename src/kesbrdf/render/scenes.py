@@ -212,7 +212,7 @@ def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
     elif opts.mapping != "deviation":  # never ignore an option silently
         raise KesbrdfError(f"mapping {opts.mapping!r} applies to kes models only; a {kind} model has its own "
                            "parametrisation (drop --mapping)")
-    if opts.extrapolation != "hold":
+    if kind != "fibre-prior" or opts.extrapolation != "hold":  # the plugins' default is the model's own
         d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
         d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)

@@ -1,0 +1,89 @@
+"""Grazing energy (issue 16): no model kind gains energy toward grazing incidence.
+
+Before the fix, eq. 3's 1/√(cos θ_i cos θ_r) made a lobe's directional albedo grow as
+1/√cos θ_i (a ``kes`` fit of the Ward reference: 0.33 at normal incidence, 2.95 at
+89.99°), and the last γ column held up to γ = π put the in-plane grazing value on every
+back-scattering pair (with only the first fixed, a ``scattered`` fit of the Sadeghi silk
+crêpe still reached 1.39 at 89.99°; with neither, 17.2).
+The full table is ``benchmarks/bench_energy.py`` (``results.json`` → ``energy``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import kesbrdf
+from kesbrdf.diagnostics import GRAZING_ANGLES_DEG, grazing_albedo
+from kesbrdf.gonio import measure
+from kesbrdf.references.registry import make_reference
+
+#: Every kind on two families: a half-vector Gaussian (Ward) and a bright microcylinder
+#: silk whose lobe extrapolation gained most (Sadeghi silk crêpe).  ``fibre-prior`` is
+#: checked on Ward and the Sadeghi satin instead: on the silk crêpe its own prior lobe
+#: (not eq. 3) reaches 1.67 in red at grazing incidence, a known limit recorded in
+#: docs/decisions.md ("Grazing energy") and ``benchmarks/results.json`` → ``energy``.
+CASES = [(fam, kind) for fam in ("ward", "sadeghi-silk-crepe") for kind in ("kes", "kes-halfdiff", "scattered")]
+CASES += [("ward", "fibre-prior"), ("sadeghi-satin", "fibre-prior")]
+#: Small quadrature for speed: (48, 96) nodes.  Its difference to (192, 384) on these
+#: fits is below 4e-3 (measured at every angle and case here), so 1 − QUAD_TOL is
+#: asserted rather than 1.
+N_S, N_PHI = 48, 96
+QUAD_TOL = 5e-3
+
+
+@pytest.fixture(scope="module")
+def fits():
+    refs = {fam: make_reference(fam) for fam, _ in CASES}
+    out = {}
+    for fam, kind in CASES:
+        # dense at 10° (324 samples) keeps the kes-halfdiff fit under a second
+        m = measure(refs[fam], protocol="dense", step_deg=10) if kind == "kes-halfdiff" else measure(refs[fam])
+        out[fam, kind] = kesbrdf.fit(m, kind=kind)[0]
+    return out
+
+
+def _albedo(brdf):
+    """Largest albedo over light azimuths along warp and weft, per θ_i and channel."""
+    return np.max([grazing_albedo(brdf, GRAZING_ANGLES_DEG, p, N_S, N_PHI) for p in (0.0, 90.0)], axis=0)
+
+
+@pytest.mark.parametrize("family,kind", CASES)
+def test_directional_albedo_stays_below_one_up_to_grazing(fits, family, kind):
+    a = _albedo(fits[family, kind].evaluate)
+    worst = np.unravel_index(np.argmax(a), a.shape)
+    assert a.max() <= 1.0 - QUAD_TOL, (
+        f"{kind} fit of {family}: albedo {a.max():.3f} at theta_i = {GRAZING_ANGLES_DEG[worst[0]]} deg"
+    )
+
+
+@pytest.mark.parametrize("family", ["ward", "sadeghi-silk-crepe"])
+def test_kes_albedo_stays_below_the_tables_own_bound(fits, family):
+    """a(θ_i) ≤ π·c + (1/λ)·2π∫max_φ q(φ, γ)·fade(γ) sin γ dγ at every incidence: the bound
+    the measured table itself sets (mappings docstring), finite only with the fix."""
+    import math
+
+    from kesbrdf.mappings import BOUNDED_LAMBDA, fade
+
+    model = fits[family, "kes"]
+    g = np.linspace(0.0, np.pi, 4001)
+    q = np.stack([np.interp(g, model.gamma_grid, model.table[..., c].max(axis=0)) for c in range(model.n_channels)], -1)
+    q *= fade(g, model.gamma_max, model.extrapolation)[:, None]
+    lobe = 2 * math.pi * np.trapezoid(q * np.sin(g)[:, None], g, axis=0) / BOUNDED_LAMBDA
+    bound = math.pi * model.body + lobe
+    assert np.all(_albedo(model.evaluate) <= bound + QUAD_TOL)
+
+
+def test_files_without_the_new_parameters_evaluate_as_before(tmp_path, random_pairs):
+    """A model file written before the fix (no ``normalisation``/``extrapolation``) keeps
+    its meaning: q/√(cos θ_i cos θ_r) with the last γ column held, as it was fitted."""
+    from kesbrdf.mappings import to_phi_gamma
+    from kesbrdf.model import load
+
+    legacy = kesbrdf.fit(measure(make_reference("ward")), kind="kes", normalisation="sqrtcos", extrapolation="hold")[0]
+    del legacy.parameters["normalisation"], legacy.parameters["extrapolation"]
+    old = load(legacy.save(tmp_path / "old.kes.json"))
+    assert (old.normalisation, old.extrapolation) == ("sqrtcos", "hold")
+    wi, wr = random_pairs
+    expected = old.body + old.lookup_unit(*to_phi_gamma(wi, wr)) / np.sqrt(wi[:, 2] * wr[:, 2])[:, None]
+    np.testing.assert_allclose(old.evaluate(wi, wr), expected, rtol=1e-12)
