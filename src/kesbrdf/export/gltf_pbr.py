@@ -160,7 +160,7 @@ def ior_and_color_of_f0(f0) -> tuple[float, np.ndarray]:
     if top <= F0_RANGE[0]:
         return FIBRE_IOR_RANGE[0], f0 / F0_RANGE[0]
     r = math.sqrt(top)
-    ior = (1 + r) / (1 - r)
+    ior = min(max((1 + r) / (1 - r), FIBRE_IOR_RANGE[0]), FIBRE_IOR_RANGE[1])  # exact ends despite rounding
     return ior, f0 / top
 
 
