@@ -21,9 +21,14 @@ Following the UsdPreviewSurface specification (roughness squared before use, F0 
 (Storm adds ε = 10⁻³ to D's numerator and the denominator; omitted here.)
 
 Fitted, each within its physical range: ``diffuseColor`` [0, 1] per channel,
-``roughness`` [:data:`ROUGHNESS_MIN`, 1] and ``ior`` in textile fibres' range
-:data:`~kesbrdf.export.analytic_fit.FIBRE_IOR_RANGE` (F0 1.7–8.2 %), so a near-black
-fabric never becomes a grey mirror.
+``roughness`` [:data:`ROUGHNESS_MIN`, 1] and ``ior`` in :data:`IOR_RANGE` (F0
+1.7–5.3 %), so a near-black fabric never becomes a grey mirror.  The upper end is
+the isotropic (mean) index of textile fibres, 1.6, not the 1.8 the anisotropic
+targets allow (birefringent polyester reaches 1.72 along the fibre only): the
+fallback has no fuzz, sheen or anisotropy, so its fit pushes F0 to whatever bound it
+is given to stand in for them (every reference in docs/exports.md ends at the
+bound), and a preview must keep a dark fabric's normal-incidence reflectance
+below 6 %.
 """
 
 from __future__ import annotations
@@ -33,11 +38,14 @@ import numpy as np
 from kesbrdf.export.analytic_fit import FIBRE_IOR_RANGE, ParamSpec
 from kesbrdf.export.microfacet import pair_geometry, schlick_weight
 
-__all__ = ["PreviewSurface", "PREVIEW_SURFACE", "preview_surface_brdf", "normal_incidence_f0", "ROUGHNESS_MIN"]
+__all__ = ["PreviewSurface", "PREVIEW_SURFACE", "preview_surface_brdf", "normal_incidence_f0", "ROUGHNESS_MIN", "IOR_RANGE"]
 
 #: roughness lower bound of the fit (α = 0.0025): a preview surface sharper than this is
 #: a mirror, which no fabric is.
 ROUGHNESS_MIN = 0.05
+#: ``ior`` range of the fallback: textile fibres' lower end to their isotropic mean index
+#: (module docstring); F0 = 1.7–5.3 %.
+IOR_RANGE = (FIBRE_IOR_RANGE[0], 1.6)
 
 
 def normal_incidence_f0(ior):
@@ -75,7 +83,7 @@ class PreviewSurface:
         return [
             ParamSpec("diffuse_color", 0.0, 1.0, 0.3, "color"),
             ParamSpec("roughness", ROUGHNESS_MIN, 1.0, 0.5),
-            ParamSpec("ior", FIBRE_IOR_RANGE[0], FIBRE_IOR_RANGE[1], 1.5),
+            ParamSpec("ior", IOR_RANGE[0], IOR_RANGE[1], 1.5),
         ]
 
     def rotation_basins(self):
