@@ -19,7 +19,9 @@ Objective (image space, :mod:`kesbrdf.export.image_space`)
 
     i.e. the difference of the *displayed* pixel values of the two materials, each pair
     weighted by the image area that shows it (cos θ_r) and by a studio light
-    distribution L over the light–viewer angle β.  The tone map keeps the highlight in
+    distribution L over the light–viewer angle β; d is averaged over the studio
+    exposure and three stops under it (``image_space.bracketed_value``), so a highlight
+    the tone map squeezes near white still counts by its energy.  The tone map keeps the highlight in
     range and the sRGB curve keeps the body colour of a dark fabric visible, so both
     count as they do in a picture (a plain BRDF residual let the old fits drop a black
     satin's body colour to 10⁻³³ and raise its index to the bound, 5).
@@ -44,7 +46,8 @@ Anisotropy rotation
     Both costs are reported.  ρ is returned in [0, π).
 
 Error report (:attr:`AnalyticFit.error`)
-    ``image_rmse``: the objective's RMS on the error grid, √(Σ w Δd² / Σ w), display units;
+    ``image_rmse``: the displayed difference at the studio exposure on the error grid,
+    √(Σ w Δd² / Σ w), display units;
     ``nrmse``: RMS of (f^fit − f^ref)·cos θ_i divided by the RMS of f^ref·cos θ_i, both
     weighted by cos θ_r dω over the error grid and pooled over channels (BRDF space);
     ``nrmse_theta_le_70``: the same over pairs with θ_i, θ_r ≤ 70° (grazing pairs, where
@@ -194,8 +197,9 @@ class AnalyticFit:
 
 
 WEIGHTING = (
-    "least squares on displayed pixel values: sqrt(w) * [d(pi f_fit cos theta_i) - d(pi f_ref cos theta_i)], "
-    "d(x) = sRGB(x/(1+x)), w = cos theta_r * L(beta) (studio light: dome + key 45 deg + rim 150 deg), "
+    "least squares on displayed pixel values: sqrt(w) * [b(pi f_fit cos theta_i) - b(pi f_ref cos theta_i)], "
+    "b(x) = (d(x) + d(x/8))/2, d(x) = sRGB(x/(1+x)), w = cos theta_r * L(beta) "
+    "(studio light: dome + key 45 deg + rim 150 deg), "
     "equal-solid-angle hemisphere cells; parameters bounded to their physical ranges"
 )
 
@@ -474,7 +478,7 @@ def fit_analytic_uncached(
     """
     from scipy.optimize import least_squares
 
-    from kesbrdf.export.image_space import display_value, pair_weight
+    from kesbrdf.export.image_space import bracketed_value, pair_weight
     from kesbrdf.export.microfacet import pair_geometry
 
     t0 = time.perf_counter()
@@ -490,14 +494,14 @@ def fit_analytic_uncached(
     radiance = math.pi * wi[:, 2:3]  # x = π f cos θ_i (image_space)
     w = pair_weight(wi, wr)[:, None] * ok
     sqrt_w = np.sqrt(w / max(float(np.sum(w)), 1e-300))
-    d_ref = display_value(ref * radiance)
+    d_ref = bracketed_value(ref * radiance)
     specs = material.param_specs()
     layout, n = _layout(specs, n_channels)
 
     def residual(x):
         f = material.evaluate(_unpack(x, layout), wi, wr, geo)
         f = np.where(np.isfinite(f), f, 0.0)
-        return (sqrt_w * (display_value(f * radiance) - d_ref)).ravel()
+        return (sqrt_w * (bracketed_value(f * radiance) - d_ref)).ravel()
 
     groups = _column_groups(material, layout, n_channels)
     # initial values: diffuse-like colour from the median reflectance
