@@ -269,6 +269,7 @@ def _jsonable(p: dict) -> dict:
 def bounds_hit(material: AnalyticMaterial, params: dict, tol: float = BOUND_TOL) -> list[str]:
     """Parameters of ``params`` at a bound of their range: ``["ior max", "base_color[B] min"]``.
 
+    A colour with every channel at the same bound is one entry (``"specular_color max"``).
     The ranges are the material's ``report_specs()`` (the written parameters) when it
     has them, else its ``param_specs()``.  The anisotropy rotation (periodic) and lower
     bounds that switch a lobe off (:attr:`ParamSpec.report_lo` False) are not listed.
@@ -280,12 +281,16 @@ def bounds_hit(material: AnalyticMaterial, params: dict, tol: float = BOUND_TOL)
             continue
         values = np.atleast_1d(np.asarray(params[spec.name], float))
         margin = tol * (spec.hi - spec.lo)
+        hits = []
         for c, v in enumerate(values):
             label = spec.name if spec.size != "color" else f"{spec.name}[{_CHANNEL_NAMES[c] if values.size == 3 else c}]"
             if spec.report_lo and v <= spec.lo + margin:
-                out.append(f"{label} min")
+                hits.append((label, "min"))
             elif v >= spec.hi - margin:
-                out.append(f"{label} max")
+                hits.append((label, "max"))
+        if len(values) > 1 and len(hits) == len(values) and len({b for _, b in hits}) == 1:
+            hits = [(spec.name, hits[0][1])]  # every channel at the same bound: one entry
+        out.extend(f"{label} {bound}" for label, bound in hits)
     return out
 
 
