@@ -120,7 +120,9 @@ class ParamSpec:
     """One fitted parameter: ``size`` is 1 or ``"color"`` (one value per channel).
 
     ``report_lo`` False: the lower bound only switches a lobe off (no sheen, no
-    anisotropy), so ending there is not reported as a fit at its bound.
+    anisotropy), so ending there is not reported as a fit at its bound.  ``lobe``: the
+    weight or colour parameter of the lobe this one shapes (a sheen's roughness); with
+    that lobe off, this parameter means nothing and its bounds are not reported.
     """
 
     name: str
@@ -129,6 +131,7 @@ class ParamSpec:
     start: float
     size: int | str = 1
     report_lo: bool = True
+    lobe: str | None = None
 
 
 class AnalyticMaterial(Protocol):
@@ -279,6 +282,8 @@ def bounds_hit(material: AnalyticMaterial, params: dict, tol: float = BOUND_TOL)
     for spec in specs:
         if spec.name == material.rotation or spec.name not in params:
             continue
+        if spec.lobe is not None and spec.lobe in params and float(np.max(params[spec.lobe])) <= BOUND_TOL:
+            continue  # the lobe is off: its shape parameters are arbitrary
         values = np.atleast_1d(np.asarray(params[spec.name], float))
         margin = tol * (spec.hi - spec.lo)
         hits = []

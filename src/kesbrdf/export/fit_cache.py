@@ -32,7 +32,7 @@ import numpy as np
 __all__ = ["FIT_VERSION", "CACHE_ENV", "cache_dir", "model_digest", "fit_key", "lookup", "store", "clear_memory"]
 
 #: Part of every key: bump when the objective, the grids' meaning or a material changes.
-FIT_VERSION = "image-space-3"
+FIT_VERSION = "image-space-4"
 #: Environment variable naming the cache folder ("off" disables the disk cache).
 CACHE_ENV = "KESBRDF_CACHE_DIR"
 #: In-memory entries kept (least recently stored dropped first).

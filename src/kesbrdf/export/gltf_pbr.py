@@ -193,7 +193,7 @@ class GltfPbr:
             ParamSpec("anisotropy_rotation", -math.pi / 2, math.pi, 0.0),
             ParamSpec("specular_f0", 0.0, F0_RANGE[1], float(f0_of_ior(IOR)), "color"),
             ParamSpec("sheen_color", 0.0, 1.0, 0.1, "color", report_lo=False),
-            ParamSpec("sheen_roughness", SHEEN_ROUGHNESS_MIN, 1.0, 0.5),
+            ParamSpec("sheen_roughness", SHEEN_ROUGHNESS_MIN, 1.0, 0.5, lobe="sheen_color"),
         ]
 
     def report_specs(self):

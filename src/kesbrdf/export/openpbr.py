@@ -95,8 +95,8 @@ class OpenPbr:
             ParamSpec("specular_ior", IOR_RANGE[0], IOR_RANGE[1], 1.5),
             ParamSpec("specular_color", 0.0, 1.0, 1.0, "color"),
             ParamSpec("fuzz_weight", 0.0, 1.0, 0.3, report_lo=False),
-            ParamSpec("fuzz_color", 0.0, 1.0, 0.5, "color", report_lo=False),
-            ParamSpec("fuzz_roughness", 0.01, 1.0, 0.5),
+            ParamSpec("fuzz_color", 0.0, 1.0, 0.5, "color", report_lo=False, lobe="fuzz_weight"),
+            ParamSpec("fuzz_roughness", 0.01, 1.0, 0.5, lobe="fuzz_weight"),
         ]
 
     def rotation_basins(self):

@@ -57,8 +57,8 @@ class StandardSurface:
             ParamSpec("specular_IOR", IOR_RANGE[0], IOR_RANGE[1], 1.5),
             ParamSpec("specular_color", 0.0, 1.0, 1.0, "color"),
             ParamSpec("sheen", 0.0, 1.0, 0.3, report_lo=False),
-            ParamSpec("sheen_color", 0.0, 1.0, 0.5, "color", report_lo=False),
-            ParamSpec("sheen_roughness", 0.05, 1.0, 0.3),
+            ParamSpec("sheen_color", 0.0, 1.0, 0.5, "color", report_lo=False, lobe="sheen"),
+            ParamSpec("sheen_roughness", 0.05, 1.0, 0.3, lobe="sheen"),
         ]
 
     def rotation_basins(self):
