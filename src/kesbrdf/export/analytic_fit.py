@@ -84,6 +84,7 @@ __all__ = [
     "fit_analytic",
     "fit_analytic_uncached",
     "fit_error",
+    "bounds_hit",
     "FIT_GRID",
     "ERROR_GRID",
     "FIBRE_IOR_RANGE",
