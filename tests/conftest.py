@@ -6,6 +6,19 @@ import pytest
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 
+@pytest.fixture(scope="session", autouse=True)
+def _private_fit_cache(tmp_path_factory):
+    """Analytic-fit cache of the test session in its own folder, never the user's
+    ~/.cache/kesbrdf (kesbrdf.export.fit_cache); tests that count fits set their own."""
+    old = os.environ.get("KESBRDF_CACHE_DIR")
+    os.environ["KESBRDF_CACHE_DIR"] = str(tmp_path_factory.mktemp("fit-cache"))
+    yield
+    if old is None:
+        os.environ.pop("KESBRDF_CACHE_DIR", None)
+    else:
+        os.environ["KESBRDF_CACHE_DIR"] = old
+
+
 @pytest.fixture
 def rng():
     """The only source of randomness in tests (seeded)."""

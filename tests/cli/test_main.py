@@ -160,3 +160,16 @@ def test_export_agreement_is_one_short_line():
                            "exact": False, "median_rel_err": 0.0178})
     assert line == "fit gltf_pbr: nrmse 0.5281, rel_l1 0.37; exact=False; median_rel_err=0.0178"
     assert "base_color" not in line and "\n" not in line
+
+
+def test_export_agreement_says_which_parameters_hit_a_bound():
+    """A fit at the edge of a physical range says so on the agreement line, per variant."""
+    from kesbrdf.cli.export import agreement_line
+
+    fit = {"material": "openpbr", "params": {}, "error": {"image_rmse": 0.07, "at_bounds": ["specular_ior max"]}}
+    line = agreement_line({"fit": {"openpbr": fit},
+                           "fit_error": {"openpbr": {"image_rmse": 0.0767, "nrmse": 0.469, "at_bounds": ["specular_ior max"]},
+                                         "standard_surface": {"image_rmse": 0.0763, "nrmse": 0.468, "at_bounds": []}},
+                           "exact": False})
+    assert line == ("fit_error openpbr: image_rmse 0.0767, nrmse 0.469, at bound: specular_ior max; "
+                    "fit_error standard_surface: image_rmse 0.0763, nrmse 0.468; exact=False")

@@ -20,10 +20,12 @@ def kes_model():
 
 @pytest.fixture(scope="session")
 def fits(kes_model):
-    """glTF, OpenPBR and Standard Surface fits of :func:`kes_model` on the small grid."""
+    """glTF, OpenPBR, Standard Surface and UsdPreviewSurface fits of :func:`kes_model` on the small grid."""
     from kesbrdf.export.analytic_fit import fit_analytic
     from kesbrdf.export.gltf_pbr import GLTF_PBR
     from kesbrdf.export.openpbr import OPENPBR
+    from kesbrdf.export.preview_surface import PREVIEW_SURFACE
     from kesbrdf.export.standard_surface import STANDARD_SURFACE
 
-    return {m.name: fit_analytic(m, kes_model, grid=TEST_FIT_GRID, error_grid=TEST_FIT_GRID) for m in (GLTF_PBR, OPENPBR, STANDARD_SURFACE)}
+    materials = (GLTF_PBR, OPENPBR, STANDARD_SURFACE, PREVIEW_SURFACE)
+    return {m.name: fit_analytic(m, kes_model, grid=TEST_FIT_GRID, error_grid=TEST_FIT_GRID) for m in materials}

@@ -44,13 +44,19 @@ def test_gltf_material_carries_fit_and_extensions(tmp_path, kes_model, fits):
     mat = doc["materials"][0]
     ext = mat["extensions"]
     assert set(ext) == set(doc["extensionsUsed"])  # every extension used is used by the material
-    assert ext["KHR_materials_ior"] == {"ior": 1.5}
+    # the fitted index, inside textile fibres' range; specularFactor 1, colours <= 1 (importers agree)
+    assert ext["KHR_materials_ior"] == {"ior": pytest.approx(fits["gltf_pbr"].params["ior"])}
+    assert 1.3 <= ext["KHR_materials_ior"]["ior"] <= 1.8
+    assert ext["KHR_materials_specular"]["specularFactor"] == 1.0
+    assert max(ext["KHR_materials_specular"]["specularColorFactor"]) <= 1.0
+    assert mat["extras"]["kesbrdf"]["fit_error"]["image_rmse"] == pytest.approx(fits["gltf_pbr"].error["image_rmse"])
+    assert mat["extras"]["kesbrdf"]["fit_error"]["at_bounds"] == fits["gltf_pbr"].error["at_bounds"]
     assert ext["KHR_materials_anisotropy"]["anisotropyRotation"] == pytest.approx(fits["gltf_pbr"].params["anisotropy_rotation"])
     assert mat["extras"]["kesbrdf"]["fit_error"]["nrmse"] == pytest.approx(fits["gltf_pbr"].error["nrmse"])
     assert "APPROXIMATION" in mat["extras"]["kesbrdf"]["note"]
-    # the informative F0 / equivalent index: F0 = min(0.04 c_s, 1) s, ior_eq = (1+√F0)/(1−√F0)
+    # the informative F0 / equivalent index: F0 = min(((η−1)/(η+1))² c_s, 1) s, ior_eq = (1+√F0)/(1−√F0)
     spec, p = mat["extras"]["kesbrdf"]["specular"], fits["gltf_pbr"].params
-    f0 = np.minimum(0.04 * np.broadcast_to(p["specular_color"], (3,)), 1.0) * p["specular"]
+    f0 = np.minimum(((p["ior"] - 1) / (p["ior"] + 1)) ** 2 * np.broadcast_to(p["specular_color"], (3,)), 1.0) * p["specular"]
     np.testing.assert_allclose(spec["f0"], f0, rtol=1e-12)
     for eta, f in zip(spec["equivalent_ior"], f0):
         assert eta is None if f >= 1 else ((eta - 1) / (eta + 1)) ** 2 == pytest.approx(f, rel=1e-9)
@@ -70,12 +76,13 @@ def test_glb_round_trips_through_pygltflib(tmp_path, kes_model, fits):
 
 
 def test_written_ior_is_the_fibre_index_the_fit_assumed():
-    """KHR_materials_ior carries the η the gltf_pbr fit used, which is textile fibres' η of
-    the prior's θ_d law; with ior 1.5 the KHR_materials_specular F0 base is 0.04."""
+    """The gltf_pbr fit starts from textile fibres' η of the prior's θ_d law, inside the
+    fitted fibre range; with ior 1.5 the KHR_materials_specular F0 base is 0.04."""
+    from kesbrdf.export.analytic_fit import FIBRE_IOR_RANGE
     from kesbrdf.export.gltf_pbr import IOR, equivalent_ior
     from kesbrdf.prior import THETA_D_ETA
 
-    assert IOR == THETA_D_ETA
+    assert IOR == THETA_D_ETA and FIBRE_IOR_RANGE[0] < IOR < FIBRE_IOR_RANGE[1]
     assert ((IOR - 1) / (IOR + 1)) ** 2 == pytest.approx(0.04)
     assert equivalent_ior([0.04])[0] == pytest.approx(IOR)
     assert equivalent_ior([1.0]) == [None]

@@ -32,6 +32,8 @@ def test_mtlx_validates_against_the_standard_libraries(tmp_path, kes_model, fits
     # fitted values and the fit error made it into the file
     assert opbr.getInputValue("fuzz_roughness") == pytest.approx(fits["openpbr"].params["fuzz_roughness"], rel=1e-5)
     assert f"NRMSE {fits['openpbr'].error['nrmse']:.4f}" in opbr.getDocString()
+    assert f"image RMSE {fits['openpbr'].error['image_rmse']:.4f}" in opbr.getDocString()
+    assert "Parameters at a bound of their range: " + (", ".join(fits["openpbr"].error["at_bounds"]) or "none") in opbr.getDocString()
     assert "APPROXIMATION" in opbr.getDocString()
     rotate = doc.getNode("kesbrdf_fabric_tangent_rotate")
     import math

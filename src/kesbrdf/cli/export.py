@@ -47,23 +47,39 @@ def _number(v) -> str:
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
+def _record(label: str, value: dict) -> str:
+    """``label: name number, ...[, at bound: ...]`` of one (possibly per-variant) error record."""
+    err = value.get("error") if isinstance(value.get("error"), dict) else value
+    numbers = [f"{k} {_number(v)}" for k, v in err.items() if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    bounds = err.get("at_bounds")
+    if isinstance(bounds, list) and bounds:
+        numbers.append("at bound: " + ", ".join(map(str, bounds)))
+    if isinstance(value.get("material"), str):
+        label = f"{label} {value['material']}"
+    if numbers:
+        return f"{label}: {', '.join(numbers)}"
+    subs = [_record(f"{label} {k}", v) for k, v in value.items() if isinstance(v, dict)]
+    return "; ".join(subs) if subs else label
+
+
 def agreement_line(agreement: dict) -> str:
     """One readable line of an export's agreement with the model.
 
     Scalars print as ``name=value``; a nested record (an analytic fit: material,
     parameters, error) prints only its error numbers, e.g. ``fit gltf_pbr: nrmse 0.528,
-    nrmse_theta_le_70 0.46``.  The parameters are in the exported file itself.
+    nrmse_theta_le_70 0.46``, and the parameters that ended at a bound of their
+    physical range (``at bound: ior max``); per-variant records (MaterialX, USD) print
+    one part each.  When a short ``fit_error`` record is there, the full ``fit`` record
+    is left out.  The parameters are in the exported file itself.
     """
     parts = []
     for key, value in agreement.items():
+        if key == "fit" and isinstance(agreement.get("fit_error"), dict):
+            continue
         if not isinstance(value, dict):
             parts.append(f"{key}={_number(value)}")
             continue
-        err = value.get("error") if isinstance(value.get("error"), dict) else value
-        numbers = ", ".join(f"{k} {_number(v)}" for k, v in err.items()
-                            if isinstance(v, (int, float)) and not isinstance(v, bool))
-        label = f"{key} {value['material']}" if isinstance(value.get("material"), str) else key
-        parts.append(f"{label}: {numbers}" if numbers else label)
+        parts.append(_record(key, value))
     return "; ".join(parts)
 
 

@@ -6,16 +6,15 @@ The file holds one material (core metallic-roughness plus ``KHR_materials_anisot
 :class:`kesbrdf.export.gltf_pbr.GltfPbr`), used by two meshes with NORMAL, TANGENT
 (along the warp, w = +1) and TEXCOORD_0: a swatch and a sphere
 (:mod:`kesbrdf.export.preview_mesh`), side by side in one scene.  The fit error
-(NRMSE, relative L1, worst configurations) is written in ``material.extras.kesbrdf``
-so nobody mistakes the approximation for the measurement.
+(image RMSE, NRMSE, relative L1, worst configurations, parameters at a bound of their
+range) is written in ``material.extras.kesbrdf`` so nobody mistakes the approximation
+for the measurement.
 
-``KHR_materials_ior`` carries the index the fit assumed, 1.5 (the glTF default, and
-textile fibres' η): written explicitly so that tools which read the index (KHR
-transmission/volume-aware renderers, converters to other shading models) do not have
-to know the default.  The fitted per-channel F0 stays in ``specularColorFactor``
-(KHR_materials_specular scales the ior's F0 by it); writing an index derived from
-F0, ior = (1 + √F0)/(1 − √F0), would count F0 twice.  That equivalent index is
-written for information in ``extras.kesbrdf.specular``.
+``KHR_materials_ior`` carries the fitted index (in textile fibres' range 1.3–1.8;
+its F0 is the brightest channel's) and ``specularColorFactor`` (≤ 1) tints the other
+channels; ``specularFactor`` is 1, so F90 = 1 in every importer
+(:class:`kesbrdf.export.gltf_pbr.GltfPbr`).  The per-channel F0 and its equivalent
+index are written for information in ``extras.kesbrdf.specular``.
 
 ``.gltf`` embeds the buffer as a base64 data URI (one self-contained file);
 ``.glb`` is the binary container.  Written with ``pygltflib``.
@@ -31,7 +30,7 @@ import numpy as np
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
 
-__all__ = ["export", "build_gltf", "OPEN_WITH"]
+__all__ = ["export", "build_gltf", "fit_error_record", "agreement_numbers", "OPEN_WITH"]
 
 OPEN_WITH = (
     "any glTF 2.0 viewer with KHR_materials_anisotropy/sheen/specular/ior: Khronos glTF Sample Viewer "
@@ -45,19 +44,27 @@ _FLOAT = 5126
 _UNSIGNED_INT = 5125
 
 
-def _fit_extras(fit) -> dict:
+def fit_error_record(fit) -> dict:
+    """The fit error every analytic export writes into its file: image-space and BRDF-space
+    numbers, their definitions and the parameters that ended at a bound of their range."""
     e = fit.error
+    return {
+        "image_rmse": e["image_rmse"],
+        "nrmse": e["nrmse"],
+        "nrmse_theta_le_70": e["nrmse_theta_le_70"],
+        "rel_l1": e["rel_l1"],
+        "log_rmse": e["log_rmse"],
+        "at_bounds": list(e.get("at_bounds", [])),
+        "image_definition": e.get("image_definition", ""),
+        "definition": e["definition"],
+    }
+
+
+def _fit_extras(fit) -> dict:
     return {
         "kesbrdf": {
             "note": "APPROXIMATION: analytic glTF material fitted to the kesbrdf model; not the measurement",
-            "fit_error": {
-                "nrmse": e["nrmse"],
-                "nrmse_theta_le_70": e["nrmse_theta_le_70"],
-                "rel_l1": e["rel_l1"],
-                "log_rmse": e["log_rmse"],
-                "definition": e["definition"],
-                "worst": e["worst"],
-            },
+            "fit_error": {**fit_error_record(fit), "worst": fit.error["worst"]},
             "weighting": fit.weighting,
             "grid": fit.grid,
             "basins": fit.basins,
@@ -104,11 +111,12 @@ def build_gltf(fit, meshes, model_info: dict | None = None):
     extras = _fit_extras(fit)
     f0 = specular_f0(fit.params)
     extras["kesbrdf"]["specular"] = {
-        "ior": IOR,
+        "ior": float(fit.params.get("ior", IOR)),
         "f0": f0,
         "equivalent_ior": equivalent_ior(f0),
         "note": "F0 per channel = min(((ior-1)/(ior+1))^2 * specularColorFactor, 1) * specularFactor; "
-        "equivalent_ior = (1+sqrt(F0))/(1-sqrt(F0)) is informative, the material keeps ior",
+        "specularFactor 1 and specularColorFactor <= 1 so that importers agree (docs/exports.md); "
+        "equivalent_ior = (1+sqrt(F0))/(1-sqrt(F0)) per channel is informative",
     }
     if model_info:
         extras["kesbrdf"]["model"] = model_info
@@ -140,6 +148,12 @@ def _material_kwargs(mj: dict) -> dict:
         "extensions": mj["extensions"],
         "extras": mj.get("extras", {}),
     }
+
+
+def agreement_numbers(fit) -> dict:
+    """The short agreement record of an analytic fit: image RMSE, NRMSE, rel. L1, bounds hit."""
+    e = fit.error
+    return {"image_rmse": e["image_rmse"], "nrmse": e["nrmse"], "rel_l1": e["rel_l1"], "at_bounds": list(e.get("at_bounds", []))}
 
 
 def _model_info(model) -> dict:
@@ -198,7 +212,7 @@ def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, e
         "paths": [str(out)],
         "size": out.stat().st_size,
         "fit": fit.as_dict(),
-        "fit_error": {"nrmse": fit.error["nrmse"], "rel_l1": fit.error["rel_l1"]},
+        "fit_error": agreement_numbers(fit),
         "exact": False,
         "open_with": OPEN_WITH,
     }

@@ -25,11 +25,14 @@ The formulas and their sources:
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 
 import numpy as np
 
 __all__ = [
+    "PairGeometry",
+    "pair_geometry",
     "half_vector",
     "ggx_anisotropic_ndf",
     "ggx_anisotropic_visibility",
@@ -37,6 +40,7 @@ __all__ = [
     "fresnel_dielectric",
     "charlie_ndf",
     "charlie_visibility",
+    "charlie_lambda",
     "charlie_albedo",
     "imageworks_sheen",
     "imageworks_sheen_albedo",
@@ -56,6 +60,53 @@ def half_vector(wi, wr):
     h = np.asarray(wi, float) + np.asarray(wr, float)
     norm = np.linalg.norm(h, axis=-1, keepdims=True)
     return np.where(norm > 1e-12, h / np.where(norm > 1e-12, norm, 1.0), np.array([0.0, 0.0, 1.0]))
+
+
+@dataclasses.dataclass(frozen=True)
+class PairGeometry:
+    """What every lobe needs of a set of (wi, wr) pairs, computed once per fit.
+
+    ``h`` is the unit half vector, ``cos_i``, ``cos_r``, ``cos_h`` its angles to the
+    normal (z) and ``cos_vh`` = wr·h; ``above`` marks pairs with both directions above
+    the horizon.  Shapes (N, 3) and (N,).  ``mu_i`` / ``mu_r`` are the distinct values
+    of ``cos_i`` / ``cos_r`` (a fit grid has a few bands), ``mu_i_index`` / ``mu_r_index``
+    map the pairs onto them: :meth:`on_cos_i` evaluates a function of cos θ_i once per band.
+    """
+
+    wi: np.ndarray
+    wr: np.ndarray
+    h: np.ndarray
+    cos_i: np.ndarray
+    cos_r: np.ndarray
+    cos_h: np.ndarray
+    cos_vh: np.ndarray
+    above: np.ndarray
+    mu_i: np.ndarray
+    mu_i_index: np.ndarray
+    mu_r: np.ndarray
+    mu_r_index: np.ndarray
+
+    def on_cos_i(self, func):
+        """``func(cos θ_i)`` per pair, evaluated on the distinct values only."""
+        return np.asarray(func(self.mu_i))[self.mu_i_index]
+
+    def on_cos_r(self, func):
+        """``func(cos θ_r)`` per pair, evaluated on the distinct values only."""
+        return np.asarray(func(self.mu_r))[self.mu_r_index]
+
+
+def pair_geometry(wi, wr) -> PairGeometry:
+    """:class:`PairGeometry` of direction pairs ``wi``, ``wr`` (N, 3)."""
+    wi = np.asarray(wi, float)
+    wr = np.asarray(wr, float)
+    h = half_vector(wi, wr)
+    mu_i, mu_i_index = np.unique(wi[..., 2], return_inverse=True)
+    mu_r, mu_r_index = np.unique(wr[..., 2], return_inverse=True)
+    return PairGeometry(
+        wi=wi, wr=wr, h=h, cos_i=wi[..., 2], cos_r=wr[..., 2], cos_h=h[..., 2],
+        cos_vh=np.sum(wr * h, axis=-1), above=(wi[..., 2] > 0) & (wr[..., 2] > 0),
+        mu_i=mu_i, mu_i_index=mu_i_index.reshape(wi.shape[:-1]), mu_r=mu_r, mu_r_index=mu_r_index.reshape(wr.shape[:-1]),
+    )
 
 
 def tangent_frame(rotation):
@@ -118,14 +169,15 @@ def _charlie_l(x, r):
     return a / (1.0 + b * np.power(x, c)) + d * x + e
 
 
-def _charlie_lambda(cos_theta, r):
+def charlie_lambda(cos_theta, r):
+    """Λ(cos θ) of the Charlie sheen visibility (KHR_materials_sheen's fitted curve)."""
     x = np.abs(cos_theta)
     return np.where(x < 0.5, np.exp(_charlie_l(x, r)), np.exp(2.0 * _charlie_l(0.5, r) - _charlie_l(1.0 - x, r)))
 
 
 def charlie_visibility(cos_i, cos_r, r):
     """Charlie sheen visibility 1/((1 + Λ(n·v) + Λ(n·l))·4 n·v n·l) (KHR_materials_sheen)."""
-    return 1.0 / ((1.0 + _charlie_lambda(cos_r, r) + _charlie_lambda(cos_i, r)) * (4.0 * cos_r * cos_i))
+    return 1.0 / ((1.0 + charlie_lambda(cos_r, r) + charlie_lambda(cos_i, r)) * (4.0 * cos_r * cos_i))
 
 
 #: Node grids of the Charlie albedo table E(μ, sheenRoughness).

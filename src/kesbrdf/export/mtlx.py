@@ -13,8 +13,8 @@ One ``.mtlx`` document holds two materials fitted to the model by
     ``specular_rotation`` (turns) carries the rotation.
 
 The mesh tangent must run along the warp (as in the glTF preview meshes).  Each shader
-node's ``doc`` string states the fit error, so the file says that it is an
-approximation; :func:`export` checks ``doc.validate()`` against the standard
+node's ``doc`` string states the fit error (image RMSE, NRMSE, the parameters at a
+bound of their range), so the file says that it is an approximation; :func:`export` checks ``doc.validate()`` against the standard
 libraries before writing.
 """
 
@@ -60,10 +60,13 @@ def _color(mx, v):
 
 def _doc_string(fit) -> str:
     e = fit.error
+    bounds = ", ".join(e.get("at_bounds", [])) or "none"
     return (
-        f"APPROXIMATION of a kesbrdf extended-KES fabric model: {fit.material} fitted by robust least squares "
-        f"(cosine-weighted log residuals over the hemisphere). Fit error: NRMSE {e['nrmse']:.4f}, "
-        f"(theta <= 70 deg: {e['nrmse_theta_le_70']:.4f}), relative L1 {e['rel_l1']:.4f}, log-RMSE {e['log_rmse']:.4f} over {e['n_pairs']} direction pairs. "
+        f"APPROXIMATION of a kesbrdf extended-KES fabric model: {fit.material} fitted by least squares on displayed "
+        f"pixel values (sRGB of x/(1+x), x = pi f cos theta_i, weighted by cos theta_r and a studio light) over the hemisphere, "
+        f"every parameter within its physical range. Fit error: image RMSE {e['image_rmse']:.4f} (display units), "
+        f"NRMSE {e['nrmse']:.4f} (theta <= 70 deg: {e['nrmse_theta_le_70']:.4f}), relative L1 {e['rel_l1']:.4f}, "
+        f"log-RMSE {e['log_rmse']:.4f} over {e['n_pairs']} direction pairs. Parameters at a bound of their range: {bounds}. "
         "Tangent = warp; anisotropy rotation counter-clockwise from the warp about the normal."
     )
 
@@ -157,6 +160,7 @@ def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=
         ``paths``, ``size``, ``fit_error`` per variant, ``materials``, ``open_with``.
     """
     from kesbrdf.export.analytic_fit import ERROR_GRID, FIT_GRID, fit_analytic
+    from kesbrdf.export.gltf import agreement_numbers
     from kesbrdf.export.openpbr import OPENPBR
     from kesbrdf.export.standard_surface import STANDARD_SURFACE
 
@@ -185,7 +189,7 @@ def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=
         "size": out.stat().st_size,
         "materials": [f"{name}_{v}" for v in variants],
         "fit": {v: f.as_dict() for v, f in fits.items()},
-        "fit_error": {v: {"nrmse": f.error["nrmse"], "rel_l1": f.error["rel_l1"]} for v, f in fits.items()},
+        "fit_error": {v: agreement_numbers(f) for v, f in fits.items()},
         "exact": False,
         "open_with": OPEN_WITH,
     }

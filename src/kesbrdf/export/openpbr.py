@@ -32,13 +32,13 @@ import math
 
 import numpy as np
 
-from kesbrdf.export.analytic_fit import ParamSpec
+from kesbrdf.export.analytic_fit import FIBRE_IOR_RANGE, ParamSpec
 from kesbrdf.export.microfacet import (
     fresnel_dielectric,
     ggx_anisotropic_ndf,
     ggx_anisotropic_visibility,
     ggx_directional_albedo,
-    half_vector,
+    pair_geometry,
     tangent_frame,
     zeltner_sheen,
     zeltner_sheen_albedo,
@@ -46,9 +46,9 @@ from kesbrdf.export.microfacet import (
 
 __all__ = ["OpenPbr", "OPENPBR", "openpbr_alphas", "IOR_RANGE"]
 
-#: specular_ior fitted in this range (OpenPBR's soft range is [1, 3]; up to 5 lets a
-#: bright fabric highlight reach F0 = 0.44).
-IOR_RANGE = (1.01, 5.0)
+#: specular_ior is fitted in textile fibres' range (F0 = 1.7–8.2 %): a wider range lets
+#: the fit buy a bright highlight with a mirror-like F0 (an index of 5 gives F0 = 0.44).
+IOR_RANGE = FIBRE_IOR_RANGE
 
 
 def openpbr_alphas(roughness, anisotropy):
@@ -58,7 +58,7 @@ def openpbr_alphas(roughness, anisotropy):
     return np.minimum(alpha_t, 1.0), (1.0 - anisotropy) * np.minimum(alpha_t, 1.0)
 
 
-def dielectric_specular(wi, wr, alpha_t, alpha_b, rotation, ior, specular_color):
+def dielectric_specular(wi, wr, alpha_t, alpha_b, rotation, ior, specular_color, geo=None):
     """Tinted dielectric anisotropic GGX lobe and its layer throughput 1 − E_spec(μ_v).
 
     Returns
@@ -66,14 +66,15 @@ def dielectric_specular(wi, wr, alpha_t, alpha_b, rotation, ior, specular_color)
     spec : ndarray, shape (N, C)
     throughput : ndarray, shape (N, 1)
     """
-    h = half_vector(wi, wr)
+    g = geo if geo is not None else pair_geometry(wi, wr)
+    wi, wr, h = g.wi, g.wr, g.h
     t, b = tangent_frame(rotation)
     DV = ggx_anisotropic_ndf(h, t, b, alpha_t, alpha_b) * ggx_anisotropic_visibility(wi, wr, t, b, alpha_t, alpha_b)
-    F = fresnel_dielectric(np.sum(wr * h, axis=-1), ior)
+    F = fresnel_dielectric(g.cos_vh, ior)
     spec = np.atleast_1d(specular_color) * (F * DV)[..., None]
     f0 = ((ior - 1) / (ior + 1)) ** 2
-    nv = np.clip(wr[..., 2], 1e-6, 1.0)
-    E = ggx_directional_albedo(nv, np.sqrt(alpha_t * alpha_b), np.asarray([f0]), np.asarray([1.0]))
+    alpha = np.sqrt(alpha_t * alpha_b)
+    E = g.on_cos_r(lambda mu: ggx_directional_albedo(np.clip(mu, 1e-6, 1.0), alpha, np.asarray([f0]), np.asarray([1.0])))
     return spec, 1.0 - E
 
 
@@ -89,29 +90,28 @@ class OpenPbr:
         return [
             ParamSpec("base_color", 0.0, 1.0, 0.3, "color"),
             ParamSpec("specular_roughness", 0.02, 1.0, 0.5),
-            ParamSpec("specular_roughness_anisotropy", 0.0, 0.98, 0.5),
+            ParamSpec("specular_roughness_anisotropy", 0.0, 0.98, 0.5, report_lo=False),
             ParamSpec("tangent_rotation", -math.pi / 2, math.pi, 0.0),
             ParamSpec("specular_ior", IOR_RANGE[0], IOR_RANGE[1], 1.5),
             ParamSpec("specular_color", 0.0, 1.0, 1.0, "color"),
-            ParamSpec("fuzz_weight", 0.0, 1.0, 0.3),
-            ParamSpec("fuzz_color", 0.0, 1.0, 0.5, "color"),
-            ParamSpec("fuzz_roughness", 0.01, 1.0, 0.5),
+            ParamSpec("fuzz_weight", 0.0, 1.0, 0.3, report_lo=False),
+            ParamSpec("fuzz_color", 0.0, 1.0, 0.5, "color", report_lo=False, lobe="fuzz_weight"),
+            ParamSpec("fuzz_roughness", 0.01, 1.0, 0.5, lobe="fuzz_weight"),
         ]
 
     def rotation_basins(self):
         return ((0.0, -math.pi / 2, math.pi / 2), (math.pi / 2, 0.0, math.pi))
 
-    def evaluate(self, p, wi, wr):
-        wi = np.asarray(wi, float)
-        wr = np.asarray(wr, float)
-        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
+    def evaluate(self, p, wi, wr, geo=None):
+        g = geo if geo is not None else pair_geometry(wi, wr)
+        wi, wr, above = g.wi, g.wr, g.above
         alpha_t, alpha_b = openpbr_alphas(p["specular_roughness"], p["specular_roughness_anisotropy"])
-        spec, through_spec = dielectric_specular(wi, wr, alpha_t, alpha_b, p["tangent_rotation"], p["specular_ior"], p["specular_color"])
+        spec, through_spec = dielectric_specular(wi, wr, alpha_t, alpha_b, p["tangent_rotation"], p["specular_ior"], p["specular_color"], g)
         diffuse = through_spec * np.atleast_1d(p["base_color"]) / np.pi
-        nv = np.clip(wr[..., 2], 1e-6, 1.0)
         w_f = p["fuzz_weight"]
         fuzz = w_f * np.atleast_1d(p["fuzz_color"]) * zeltner_sheen(wi, wr, p["fuzz_roughness"])[..., None]
-        through = (1.0 - w_f * zeltner_sheen_albedo(nv, p["fuzz_roughness"]))[..., None]
+        E_fuzz = g.on_cos_r(lambda mu: zeltner_sheen_albedo(np.clip(mu, 1e-6, 1.0), p["fuzz_roughness"]))
+        through = (1.0 - w_f * E_fuzz)[..., None]
         f = fuzz + through * (spec + diffuse)
         return np.where(above[..., None], f, 0.0)
 

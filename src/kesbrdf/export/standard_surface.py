@@ -27,7 +27,7 @@ import math
 import numpy as np
 
 from kesbrdf.export.analytic_fit import ParamSpec
-from kesbrdf.export.microfacet import half_vector, imageworks_sheen, imageworks_sheen_albedo
+from kesbrdf.export.microfacet import imageworks_sheen, imageworks_sheen_albedo, pair_geometry
 from kesbrdf.export.openpbr import IOR_RANGE, dielectric_specular
 
 __all__ = ["StandardSurface", "STANDARD_SURFACE", "standard_surface_alphas"]
@@ -52,33 +52,32 @@ class StandardSurface:
         return [
             ParamSpec("base_color", 0.0, 1.0, 0.3, "color"),
             ParamSpec("specular_roughness", 0.02, 1.0, 0.5),
-            ParamSpec("specular_anisotropy", 0.0, 0.98, 0.5),
+            ParamSpec("specular_anisotropy", 0.0, 0.98, 0.5, report_lo=False),
             ParamSpec("specular_rotation", -0.25, 0.5, 0.0),
             ParamSpec("specular_IOR", IOR_RANGE[0], IOR_RANGE[1], 1.5),
             ParamSpec("specular_color", 0.0, 1.0, 1.0, "color"),
-            ParamSpec("sheen", 0.0, 1.0, 0.3),
-            ParamSpec("sheen_color", 0.0, 1.0, 0.5, "color"),
-            ParamSpec("sheen_roughness", 0.05, 1.0, 0.3),
+            ParamSpec("sheen", 0.0, 1.0, 0.3, report_lo=False),
+            ParamSpec("sheen_color", 0.0, 1.0, 0.5, "color", report_lo=False, lobe="sheen"),
+            ParamSpec("sheen_roughness", 0.05, 1.0, 0.3, lobe="sheen"),
         ]
 
     def rotation_basins(self):
         # specular_rotation is in turns: 0 and a quarter turn (π/2)
         return ((0.0, -0.25, 0.25), (0.25, 0.0, 0.5))
 
-    def evaluate(self, p, wi, wr):
-        wi = np.asarray(wi, float)
-        wr = np.asarray(wr, float)
-        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
+    def evaluate(self, p, wi, wr, geo=None):
+        g = geo if geo is not None else pair_geometry(wi, wr)
+        wi, wr, above = g.wi, g.wr, g.above
         alpha_x, alpha_y = standard_surface_alphas(p["specular_roughness"], p["specular_anisotropy"])
         rotation = 2 * math.pi * p["specular_rotation"]
-        spec, through_spec = dielectric_specular(wi, wr, alpha_x, alpha_y, rotation, p["specular_IOR"], p["specular_color"])
-        nl = np.clip(wi[..., 2], 1e-6, 1.0)
-        nv = np.clip(wr[..., 2], 1e-6, 1.0)
-        h = half_vector(wi, wr)
+        spec, through_spec = dielectric_specular(wi, wr, alpha_x, alpha_y, rotation, p["specular_IOR"], p["specular_color"], g)
+        nl = np.clip(g.cos_i, 1e-6, 1.0)
+        nv = np.clip(g.cos_r, 1e-6, 1.0)
         base = np.atleast_1d(p["base_color"]) / np.pi
         w_sh = p["sheen"]
-        sheen = w_sh * np.atleast_1d(p["sheen_color"]) * imageworks_sheen(nl, nv, h[..., 2], p["sheen_roughness"])[..., None]
-        through_sheen = (1.0 - w_sh * imageworks_sheen_albedo(nv, p["sheen_roughness"]))[..., None]
+        sheen = w_sh * np.atleast_1d(p["sheen_color"]) * imageworks_sheen(nl, nv, g.cos_h, p["sheen_roughness"])[..., None]
+        E_sheen = g.on_cos_r(lambda mu: imageworks_sheen_albedo(np.clip(mu, 1e-6, 1.0), p["sheen_roughness"]))
+        through_sheen = (1.0 - w_sh * E_sheen)[..., None]
         f = spec + through_spec * (sheen + through_sheen * base)
         return np.where(above[..., None], f, 0.0)
 

@@ -2,7 +2,8 @@
 
 The stage (written with ``usd-core``) holds
 
-- ``/Looks/kesbrdf_fabric``: a ``UsdShade.Material`` with two surface outputs:
+- ``/Looks/kesbrdf_fabric``: a ``UsdShade.Material`` (``customData`` holds both fits'
+  errors and the parameters that ended at a bound) with two surface outputs:
 
   * ``outputs:mtlx:surface`` → an OpenPBR Surface network in the USD encoding of
     MaterialX (``info:id = "ND_open_pbr_surface_surfaceshader"``, the tangent rotated by
@@ -10,8 +11,11 @@ The stage (written with ``usd-core``) holds
     and usdview's Storm read; the same material is written to the sidecar ``.mtlx``
     (:mod:`kesbrdf.export.mtlx`), named in the material's ``customData``;
   * ``outputs:surface`` → a ``UsdPreviewSurface`` fallback for every other renderer:
-    isotropic, so only a coarse approximation (diffuseColor = base_color,
-    roughness = (α_t α_b)^{1/4}, ior = specular_ior).
+    isotropic, so coarser, but fitted to the model in its own right
+    (:mod:`kesbrdf.export.preview_surface`: diffuseColor, roughness and an ior in
+    textile fibres' range 1.3–1.8, metallic 0), so it shows the fabric's colour with a
+    plausible gloss; the OpenPBR parameters are not copied into it (a bright OpenPBR
+    specular layer on a black base would make a grey mirror of a black fabric).
 
   A reference arc to the ``.mtlx`` itself is not written: it needs the usdMtlx file
   format plugin, which the ``usd-core`` wheel does not ship, and a stage that fails to
@@ -75,12 +79,24 @@ def _add_mesh(stage, path, mesh, offset_x, material, Gf, Sdf, UsdGeom, UsdShade,
     return m
 
 
-def build_stage(stage, fit, mtlx_name: str | None):
-    """Define the material and the preview meshes on ``stage`` (an ``Usd.Stage``)."""
+def _error_data(fit) -> dict:
+    e = fit.error
+    return {
+        "image_rmse": float(e["image_rmse"]), "nrmse": float(e["nrmse"]), "rel_l1": float(e["rel_l1"]),
+        "log_rmse": float(e["log_rmse"]), "at_bounds": ", ".join(e.get("at_bounds", [])),
+    }
+
+
+def build_stage(stage, fit, mtlx_name: str | None, preview_fit=None):
+    """Define the material and the preview meshes on ``stage`` (an ``Usd.Stage``).
+
+    ``fit`` is the OpenPBR fit; ``preview_fit`` the UsdPreviewSurface fit of the fallback.
+    """
     Gf, Sdf, Usd, UsdGeom, UsdShade, Vt = _pxr()
-    from kesbrdf.export.openpbr import openpbr_alphas
     from kesbrdf.export.preview_mesh import swatch, uv_sphere
 
+    if preview_fit is None or preview_fit.material != "preview_surface":
+        raise KesbrdfError("usd export: expected a 'preview_surface' fit for the UsdPreviewSurface fallback")
     p = fit.params
     UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
     UsdGeom.SetStageMetersPerUnit(stage, 1.0)
@@ -88,13 +104,16 @@ def build_stage(stage, fit, mtlx_name: str | None):
     stage.SetDefaultPrim(root.GetPrim())
     UsdGeom.Scope.Define(stage, "/Looks")
     material = UsdShade.Material.Define(stage, MATERIAL_PATH)
-    e = fit.error
+    e, ep = fit.error, preview_fit.error
     note = (
-        f"APPROXIMATION of a kesbrdf extended-KES fabric model ({fit.material} fit): NRMSE {e['nrmse']:.4f}, "
-        f"relative L1 {e['rel_l1']:.4f} over the hemisphere; tangent = warp"
+        f"APPROXIMATION of a kesbrdf extended-KES fabric model. OpenPBR ({fit.material} fit): image RMSE "
+        f"{e['image_rmse']:.4f}, NRMSE {e['nrmse']:.4f}; UsdPreviewSurface fallback: image RMSE {ep['image_rmse']:.4f}, "
+        f"NRMSE {ep['nrmse']:.4f}; parameters at a bound of their range: "
+        f"{', '.join(e.get('at_bounds', [])) or 'none'} / {', '.join(ep.get('at_bounds', [])) or 'none'}; tangent = warp"
     )
     material.GetPrim().SetDocumentation(note)
-    material.GetPrim().SetCustomDataByKey("kesbrdf:fit_error", {"nrmse": float(e["nrmse"]), "rel_l1": float(e["rel_l1"]), "log_rmse": float(e["log_rmse"])})
+    material.GetPrim().SetCustomDataByKey("kesbrdf:fit_error", _error_data(fit))
+    material.GetPrim().SetCustomDataByKey("kesbrdf:preview_fit_error", _error_data(preview_fit))
     if mtlx_name:
         material.GetPrim().SetCustomDataByKey("kesbrdf:mtlx", Sdf.AssetPath(mtlx_name))
 
@@ -131,14 +150,15 @@ def build_stage(stage, fit, mtlx_name: str | None):
     sh.CreateInput("geometry_tangent", v3).ConnectToSource(norm.CreateOutput("out", v3))
     material.CreateSurfaceOutput("mtlx").ConnectToSource(sh.CreateOutput("surface", Sdf.ValueTypeNames.Token))
 
-    # UsdPreviewSurface fallback (isotropic)
-    alpha_t, alpha_b = openpbr_alphas(float(p["specular_roughness"]), float(p["specular_roughness_anisotropy"]))
+    # UsdPreviewSurface fallback (isotropic), fitted in its own right (preview_surface)
+    pp = preview_fit.params
     ps = UsdShade.Shader.Define(stage, f"{MATERIAL_PATH}/preview_surface")
     ps.CreateIdAttr("UsdPreviewSurface")
-    ps.CreateInput("diffuseColor", c3).Set(_rgb(Gf, p["base_color"]))
-    ps.CreateInput("roughness", f).Set(float((alpha_t * alpha_b) ** 0.25))
+    ps.CreateInput("diffuseColor", c3).Set(_rgb(Gf, pp["diffuse_color"]))
+    ps.CreateInput("roughness", f).Set(float(pp["roughness"]))
     ps.CreateInput("metallic", f).Set(0.0)
-    ps.CreateInput("ior", f).Set(float(p["specular_ior"]))
+    ps.CreateInput("useSpecularWorkflow", Sdf.ValueTypeNames.Int).Set(0)
+    ps.CreateInput("ior", f).Set(float(pp["ior"]))
     material.CreateSurfaceOutput().ConnectToSource(ps.CreateOutput("surface", Sdf.ValueTypeNames.Token))
 
     _add_mesh(stage, "/Preview/swatch", swatch(1.0), -0.75, material, Gf, Sdf, UsdGeom, UsdShade, Vt)
@@ -160,15 +180,18 @@ def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=No
         ``paths`` (the .usda, then the .mtlx), ``size`` (of the .usda), ``fit_error``, ``open_with``.
     """
     from kesbrdf.export.analytic_fit import ERROR_GRID, FIT_GRID, fit_analytic
+    from kesbrdf.export.gltf import agreement_numbers
     from kesbrdf.export.openpbr import OPENPBR
+    from kesbrdf.export.preview_surface import PREVIEW_SURFACE
 
     Gf, Sdf, Usd, UsdGeom, UsdShade, Vt = _pxr()
     out = Path(out)
     if out.suffix.lower() not in (".usda", ".usd"):
         raise KesbrdfError(f"usd export: expected an output ending in .usda (or .usd, written as text), got {out.name!r}")
     fits = dict(fits or {})
-    if "openpbr" not in fits:
-        fits["openpbr"] = fit_analytic(OPENPBR, model, grid=fit_grid or FIT_GRID, error_grid=error_grid or ERROR_GRID)
+    for material in (OPENPBR, PREVIEW_SURFACE):
+        if material.name not in fits:
+            fits[material.name] = fit_analytic(material, model, grid=fit_grid or FIT_GRID, error_grid=error_grid or ERROR_GRID)
     paths = [str(out)]
     mtlx_name = None
     result_extra = {}
@@ -176,22 +199,22 @@ def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=No
         from kesbrdf.export import mtlx
 
         mtlx_path = out.with_suffix(".mtlx")
-        res = mtlx.export(model, mtlx_path, fits=fits, fit_grid=fit_grid, error_grid=error_grid)
+        res = mtlx.export(model, mtlx_path, fits={k: v for k, v in fits.items() if k in mtlx.VARIANTS},
+                          fit_grid=fit_grid, error_grid=error_grid)
         mtlx_name = "./" + mtlx_path.name
         paths.append(str(mtlx_path))
         result_extra["mtlx_size"] = res["size"]
     with atomic_path(out) as tmp:
         layer = Sdf.Layer.CreateAnonymous(".usda")
         stage = Usd.Stage.Open(layer)
-        build_stage(stage, fits["openpbr"], mtlx_name)
+        build_stage(stage, fits["openpbr"], mtlx_name, fits["preview_surface"])
         tmp.write_text(layer.ExportToString())
-    fe = fits["openpbr"].error
     return {
         "format": "usd",
         "paths": paths,
         "size": out.stat().st_size,
         "material": MATERIAL_PATH,
-        "fit_error": {"openpbr": {"nrmse": fe["nrmse"], "rel_l1": fe["rel_l1"]}},
+        "fit_error": {"openpbr": agreement_numbers(fits["openpbr"]), "preview_surface": agreement_numbers(fits["preview_surface"])},
         "exact": False,
         "open_with": OPEN_WITH,
         **result_extra,
