@@ -148,6 +148,11 @@ def _describe(material) -> dict:
                 v = sock.default_value
                 val = [round(float(a), 6) for a in v][:3] if sock.type == "RGBA" else round(float(v), 6)
                 out[sock.name] = {"value": val, "linked": sock.is_linked}
+        tangent = node.inputs.get("Tangent")
+        src = tangent.links[0].from_node if tangent is not None and tangent.is_linked else None
+        # unlinked, Cycles uses a radial tangent around the object's z axis, not the UVs
+        out["Tangent"] = (f"{src.bl_idname}:{getattr(src, 'direction_type', '')}:{getattr(src, 'uv_map', '')}"
+                          if src is not None else "default (radial about the object's z axis)")
         break
     return out
 

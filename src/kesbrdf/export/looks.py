@@ -69,6 +69,8 @@ __all__ = [
     "openpbr_to_principled",
     "read_openpbr",
     "check_look",
+    "PluginReference",
+    "compare_export",
     "check_looks",
     "look_line",
     "write_side_by_side",
@@ -91,6 +93,9 @@ SPHERE_RADIUS = 0.45
 CLOTH_SIZE = 1.0
 #: Camera direction from the scene centre (y up, camera on +z), as the render scenes.
 VIEW_DIR = (0.0, 0.55, 1.0)
+#: Camera distance: the bounding sphere's radius times this fills the vertical field of
+#: view (the render scenes use 0.95; the pair of objects is wider than tall, so closer).
+FRAMING = 0.7
 
 
 class LookOptions:
@@ -167,7 +172,7 @@ def studio_scene(resolution=(256, 192)) -> dict:
     fov = FOV_DEG if w >= h else math.degrees(2 * math.atan(math.tan(math.radians(FOV_DEG * w / h) / 2) * h / w))
     fov_for_dist = FOV_DEG if w >= h else FOV_DEG * w / h
     view = np.asarray(VIEW_DIR, float) / np.linalg.norm(VIEW_DIR)
-    dist = 0.95 * radius / math.sin(math.radians(fov_for_dist) / 2)
+    dist = FRAMING * radius / math.sin(math.radians(fov_for_dist) / 2)
     return {
         "objects": {"sphere": sphere, "cloth": cloth, "floor": floor},
         "fabric": ("sphere", "cloth"),
@@ -443,7 +448,7 @@ def write_side_by_side(path, left8, right8, titles, footer: str, flip8=None) -> 
     return Path(path)
 
 
-class _Reference:
+class PluginReference:
     """The plugin renders (two seeds), the fabric mask and the display exposure, made once."""
 
     def __init__(self, model_path, scene, opts):
@@ -459,11 +464,21 @@ class _Reference:
         self.ref8 = noise["_ref8"]
 
 
-def _look_row(fmt, path, ref: _Reference, scene, opts, out_dir: Path, workdir: Path) -> dict:
+def compare_export(ref: PluginReference, fmt: str, path, scene: dict, opts: LookOptions, workdir) -> dict:
+    """Render one export in its renderer and compare it with the plugin render ``ref``
+    (:func:`kesbrdf.render.compare.compare_images`: ``flip``, ``rel_rmse``, 8-bit images, FLIP map)
+    plus ``_image`` (linear) and ``_info`` (renderer details)."""
     from kesbrdf.render.compare import compare_images
 
-    img, info = render_export(fmt, path, scene, opts, workdir / fmt)
+    img, info = render_export(fmt, path, scene, opts, workdir)
     r = compare_images(ref.image, img, ref.mask, ref.exposure)
+    r["_image"], r["_info"] = img, info
+    return r
+
+
+def _look_row(fmt, path, ref: PluginReference, scene, opts, out_dir: Path, workdir: Path) -> dict:
+    r = compare_export(ref, fmt, path, scene, opts, workdir / fmt)
+    info = r["_info"]
     stem = out_dir / f"look_{fmt}"
     _save_png(stem.with_name(stem.name + "_render.png"), r["_test8"])
     renderer = RENDERERS[fmt]
@@ -509,7 +524,7 @@ def check_looks(model_path, exports: dict, out_dir, opts: LookOptions | None = N
     if unknown:
         raise ExportError(f"look: expected formats from {', '.join(RENDERERS)}, got {', '.join(unknown)}")
     scene = studio_scene(opts.resolution)
-    ref = _Reference(model_path, scene, opts)
+    ref = PluginReference(model_path, scene, opts)
     _save_png(out_dir / "look_plugin.png", ref.ref8)
     rows = []
     with tempfile.TemporaryDirectory(prefix="kesbrdf-look-") as tmp:
