@@ -88,3 +88,80 @@ def test_gltf_in_blender_matches_the_plugin_and_a_turned_anisotropy_does_not(set
     # the importer follows the UV map's tangent (the warp), not its radial default: the
     # export's constant anisotropyTexture is what makes it do so
     assert good["_info"]["principled"]["Tangent"].startswith("ShaderNodeTangent:UV_MAP:UVMap")
+
+
+# -- no renders below: the mapping, the scene, the CLI and the report section ------------
+#: Blender's Principled anisotropy (aspect √(1 − 0.9 a), kesbrdf.export.looks.BLENDER_ANISO_SCALE).
+def _blender_alphas(roughness, aniso):
+    aspect = math.sqrt(1.0 - 0.9 * aniso)
+    return roughness**2 / aspect, roughness**2 * aspect
+
+
+@pytest.mark.parametrize("r, a", [(0.3, 0.0), (0.4, 0.5), (0.2, 0.7)])
+def test_openpbr_to_principled_keeps_the_lobe_widths(r, a):
+    """Blender's (α_x, α_y) from the mapped inputs are OpenPBR's (α_t, α_b) (within Blender's 10:1 range)."""
+    from kesbrdf.export.looks import openpbr_to_principled
+    from kesbrdf.export.openpbr import openpbr_alphas
+
+    p = openpbr_to_principled({"specular_roughness": r, "specular_roughness_anisotropy": a, "tangent_rotation_deg": 90.0,
+                               "base_color": [0.1, 0.2, 0.3], "fuzz_weight": 0.4})
+    at, ab = (float(x) for x in openpbr_alphas(r, a))
+    bx, by = _blender_alphas(p["Roughness"], p["Anisotropic"])
+    assert bx == pytest.approx(at, rel=1e-9) and by == pytest.approx(ab, rel=1e-9)
+    assert p["Anisotropic Rotation"] == pytest.approx(0.25)
+    assert p["Base Color"] == [0.1, 0.2, 0.3] and p["Sheen Weight"] == 0.4
+
+
+def test_studio_scene_lights_face_the_subject_with_the_studio_radiance():
+    """Every soft box's quad (the corners both renderers get) faces the scene centre, with
+    the size and radiance of kesbrdf.render.studio."""
+    from kesbrdf.export.looks import studio_scene
+    from kesbrdf.render.studio import KEY_RADIANCE, STUDIO_LIGHTS
+
+    sc = studio_scene((64, 48))
+    c, r = np.asarray(sc["center"]), sc["radius"]
+    assert len(sc["lights"]) == len(STUDIO_LIGHTS)
+    for (corners, radiance), (_n, _d, dist, (w, h), rel) in zip(sc["lights"], STUDIO_LIGHTS):
+        q = np.asarray(corners)
+        normal = np.cross(q[1] - q[0], q[2] - q[0])
+        normal /= np.linalg.norm(normal)
+        to_c = c - q.mean(0)
+        assert np.dot(normal, to_c / np.linalg.norm(to_c)) > 0.999
+        assert np.linalg.norm(to_c) == pytest.approx(dist * r)
+        assert np.linalg.norm(q[1] - q[0]) == pytest.approx(w * r) and np.linalg.norm(q[3] - q[0]) == pytest.approx(h * r)
+        assert radiance == pytest.approx([rel * k for k in KEY_RADIANCE])
+    # u runs along the warp: on the flat sphere equator and across the cloth's folds, ∂p/∂u ⟂ up
+    p, n, uv, f = sc["objects"]["cloth"]
+    assert np.ptp(p[uv[:, 0] > 0.99, 0]) < 1e-9  # the edge u = 1 is one x: u along x
+
+
+def test_check_look_rejects_a_format_without_renderer_before_exporting(tmp_path, kes_model, capsys):
+    from kesbrdf.cli.main import main
+
+    path = tmp_path / "m.kes.json"
+    kes_model.save(path)
+    out = tmp_path / "x.html"
+    assert main(["export", str(path), "--format", "brdf-explorer", "-o", str(tmp_path / "x.brdf"), "--check-look"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--check-look" in err[0] and "brdf-explorer" in err[0]
+    assert not (tmp_path / "x.brdf").exists() and not out.exists()
+
+
+def test_report_section_lists_every_format_and_embeds_the_images(tmp_path):
+    from PIL import Image
+
+    from kesbrdf.plotting.report import _looks_html
+
+    side = tmp_path / "side.png"
+    Image.new("RGB", (8, 4)).save(side)
+    looks = {"rows": [
+        {"format": "gltf", "renderer": "Blender Cycles (glTF importer)", "flip": 0.1234, "rel_rmse": 0.2,
+         "noise_flip": 0.05, "noise_rel_rmse": 0.04, "images": {"side_by_side": str(side)}},
+        {"format": "usd", "renderer": "Blender Cycles", "skipped": "needs bpy"},
+    ]}
+    html = _looks_html(looks)
+    assert "Exports in their renderers" in html
+    assert "gltf in Blender Cycles (glTF importer): FLIP 0.123" in html
+    assert html.count("data:image/png;base64,") == 1
+    assert "usd: not rendered (needs bpy)" in html
+    assert _looks_html(None) == "" and _looks_html({"rows": []}) == ""
