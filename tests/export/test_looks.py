@@ -165,3 +165,24 @@ def test_report_section_lists_every_format_and_embeds_the_images(tmp_path):
     assert html.count("data:image/png;base64,") == 1
     assert "usd: not rendered (needs bpy)" in html
     assert _looks_html(None) == "" and _looks_html({"rows": []}) == ""
+
+
+def test_usd_preview_surface_shows_the_tinted_reflectance():
+    """UsdPreviewSurface has no specular tint: its ior must give OpenPBR's tinted F0
+    (F0(η)·c̄), not the untinted F0(η) (twice too shiny on the Ward fabric, measured in Blender)."""
+    pytest.importorskip("pxr")
+    from types import SimpleNamespace
+
+    from pxr import Sdf, Usd, UsdShade
+
+    from kesbrdf.export.usd import MATERIAL_PATH, build_stage
+
+    p = {"base_color": [0.4, 0.2, 0.05], "specular_roughness": 0.45, "specular_roughness_anisotropy": 0.5,
+         "tangent_rotation": math.pi / 2, "specular_ior": 5.0, "specular_color": [0.43, 0.43, 0.43],
+         "fuzz_weight": 1.0, "fuzz_color": [0.3, 0.2, 0.1], "fuzz_roughness": 1.0}
+    fit = SimpleNamespace(params=p, material="openpbr", error={"nrmse": 0.2, "rel_l1": 0.1, "log_rmse": 0.01})
+    stage = Usd.Stage.Open(Sdf.Layer.CreateAnonymous(".usda"))
+    build_stage(stage, fit, None)
+    eta = UsdShade.Shader.Get(stage, f"{MATERIAL_PATH}/preview_surface").GetInput("ior").Get()
+    f0 = ((eta - 1) / (eta + 1)) ** 2
+    assert f0 == pytest.approx(((5.0 - 1) / (5.0 + 1)) ** 2 * 0.43, rel=1e-5)

@@ -11,7 +11,8 @@ The stage (written with ``usd-core``) holds
     (:mod:`kesbrdf.export.mtlx`), named in the material's ``customData``;
   * ``outputs:surface`` → a ``UsdPreviewSurface`` fallback for every other renderer:
     isotropic, so only a coarse approximation (diffuseColor = base_color,
-    roughness = (α_t α_b)^{1/4}, ior = specular_ior).
+    roughness = (α_t α_b)^{1/4}, ior = the index whose F0 is OpenPBR's tinted F0,
+    :func:`preview_ior`).
 
   A reference arc to the ``.mtlx`` itself is not written: it needs the usdMtlx file
   format plugin, which the ``usd-core`` wheel does not ship, and a stage that fails to
@@ -73,6 +74,23 @@ def _add_mesh(stage, path, mesh, offset_x, material, Gf, Sdf, UsdGeom, UsdShade,
     m.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]))
     UsdShade.MaterialBindingAPI.Apply(m.GetPrim()).Bind(material)
     return m
+
+
+def preview_ior(p: dict) -> float:
+    r"""The ``UsdPreviewSurface`` ior of OpenPBR parameters ``p``: the index whose F0 is
+    OpenPBR's tinted normal-incidence reflectance,
+    :math:`F_0 = ((\eta-1)/(\eta+1))^2\,\bar c_s` (c̄_s the mean ``specular_color``),
+    :math:`\eta' = (1+\sqrt{F_0})/(1-\sqrt{F_0})`.  The preview surface has no
+    specular tint, so writing ``specular_ior`` alone would show the untinted F0: the
+    Blender look check measured the preview of a Ward fabric fitted at η = 5, c̄ = 0.43,
+    F0 0.44 instead of 0.19, twice as shiny (docs/exports.md).
+    """
+    eta = float(p["specular_ior"])
+    c = p["specular_color"]
+    c = [float(a) for a in c] if hasattr(c, "__len__") else [float(c)]
+    f0 = ((eta - 1) / (eta + 1)) ** 2 * min(max(sum(c) / len(c), 0.0), 1.0)
+    r = math.sqrt(min(f0, 0.99))
+    return float((1 + r) / (1 - r))
 
 
 def build_stage(stage, fit, mtlx_name: str | None):
@@ -138,7 +156,7 @@ def build_stage(stage, fit, mtlx_name: str | None):
     ps.CreateInput("diffuseColor", c3).Set(_rgb(Gf, p["base_color"]))
     ps.CreateInput("roughness", f).Set(float((alpha_t * alpha_b) ** 0.25))
     ps.CreateInput("metallic", f).Set(0.0)
-    ps.CreateInput("ior", f).Set(float(p["specular_ior"]))
+    ps.CreateInput("ior", f).Set(preview_ior(p))
     material.CreateSurfaceOutput().ConnectToSource(ps.CreateOutput("surface", Sdf.ValueTypeNames.Token))
 
     _add_mesh(stage, "/Preview/swatch", swatch(1.0), -0.75, material, Gf, Sdf, UsdGeom, UsdShade, Vt)
