@@ -109,7 +109,20 @@ def test_openpbr_to_principled_keeps_the_lobe_widths(r, a):
     bx, by = _blender_alphas(p["Roughness"], p["Anisotropic"])
     assert bx == pytest.approx(at, rel=1e-9) and by == pytest.approx(ab, rel=1e-9)
     assert p["Anisotropic Rotation"] == pytest.approx(0.25)
-    assert p["Base Color"] == [0.1, 0.2, 0.3] and p["Sheen Weight"] == 0.4
+    assert p["Base Color"] == pytest.approx([0.1, 0.2, 0.3]) and p["Sheen Weight"] == 0.4
+
+
+def test_openpbr_to_principled_dims_the_body_under_a_tinted_specular():
+    """OpenPBR's diffuse sits under the untinted specular layer, Blender's under the tinted
+    one: with a tint the mapped base colour is darker, without it unchanged."""
+    from kesbrdf.export.looks import openpbr_to_principled
+
+    base = {"specular_roughness": 0.45, "base_color": [0.4, 0.2, 0.05], "specular_ior": 5.0}
+    tinted = openpbr_to_principled({**base, "specular_color": [0.43] * 3})["Base Color"]
+    plain = openpbr_to_principled({**base, "specular_color": [1.0] * 3})["Base Color"]
+    assert plain == pytest.approx([0.4, 0.2, 0.05])
+    ratio = np.asarray(tinted) / np.asarray(plain)
+    assert np.ptp(ratio) < 1e-12 and 0.6 < ratio[0] < 0.85  # (1 − E(0.44)) / (1 − E(0.19)) ≈ 0.72
 
 
 def test_studio_scene_lights_face_the_subject_with_the_studio_radiance():

@@ -361,12 +361,28 @@ def read_openpbr(path) -> dict:
 BLENDER_ANISO_SCALE = 0.9
 
 
+def diffuse_throughput_ratio(ior: float, tint: float, alpha: float) -> float:
+    """∫(1 − E(μ; F0(η)))μ dμ / ∫(1 − E(μ; F0(η)·tint))μ dμ with F90 = 1 (see :func:`openpbr_to_principled`)."""
+    from kesbrdf.export.microfacet import ggx_directional_albedo
+
+    mu = (np.arange(64) + 0.5) / 64
+    f0 = ((ior - 1) / (ior + 1)) ** 2
+    e_open = ggx_directional_albedo(mu, alpha, np.asarray([f0]), np.asarray([1.0]))[..., 0]
+    e_blend = ggx_directional_albedo(mu, alpha, np.asarray([f0 * min(max(tint, 0.0), 1.0)]), np.asarray([1.0]))[..., 0]
+    return float(np.sum((1 - e_open) * mu) / np.sum((1 - e_blend) * mu))
+
+
 def openpbr_to_principled(p: dict) -> dict:
     """Principled BSDF inputs (Blender 4.5) for OpenPBR Surface parameters.
 
     Mapping (the approximation is the difference of the two models):
 
-    - base_color → Base Color; Lambert diffuse (Diffuse Roughness 0), Metallic 0;
+    - base_color → Base Color × k; Lambert diffuse (Diffuse Roughness 0), Metallic 0.
+      OpenPBR's diffuse sits under the *untinted* specular layer (throughput
+      1 − E_spec(F0(η))), Blender's under its tinted one (1 − E_spec(F0(η)·c̄)): k is the
+      ratio of the two throughputs averaged over the cosine-weighted hemisphere
+      (MaterialX's GGX albedo fit, :func:`kesbrdf.export.microfacet.ggx_directional_albedo`),
+      so the body keeps OpenPBR's brightness (k = 1 for an untinted specular);
     - (α_t, α_b) of ``ND_open_pbr_anisotropy`` → Roughness = (α_t α_b)^{1/4} and
       Anisotropic a with Blender's aspect √(1 − 0.9 a) = √(α_b/α_t) (clipped to [0, 1]:
       Blender cannot stretch a lobe beyond α_t/α_b = 10);
@@ -384,8 +400,10 @@ def openpbr_to_principled(p: dict) -> dict:
     ratio = a_b / a_t if a_t > 0 else 1.0
     aniso = float(np.clip((1.0 - ratio) / BLENDER_ANISO_SCALE, 0.0, 1.0))
     col = lambda k, d: list(p.get(k, d))[:3]  # noqa: E731
+    k = diffuse_throughput_ratio(float(p.get("specular_ior", 1.5)), float(np.mean(col("specular_color", [1.0] * 3))),
+                                 math.sqrt(a_t * a_b))
     return {
-        "Base Color": col("base_color", [0.8] * 3),
+        "Base Color": [float(min(c * k, 1.0)) for c in col("base_color", [0.8] * 3)],
         "Metallic": 0.0,
         "Diffuse Roughness": 0.0,
         "Roughness": float((a_t * a_b) ** 0.25),
