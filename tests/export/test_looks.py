@@ -199,3 +199,18 @@ def test_usd_preview_surface_shows_the_tinted_reflectance():
     eta = UsdShade.Shader.Get(stage, f"{MATERIAL_PATH}/preview_surface").GetInput("ior").Get()
     f0 = ((eta - 1) / (eta + 1)) ** 2
     assert f0 == pytest.approx(((5.0 - 1) / (5.0 + 1)) ** 2 * 0.43, rel=1e-5)
+
+
+def test_check_look_without_bpy_is_a_one_line_error_before_exporting(tmp_path, kes_model, capsys, monkeypatch):
+    import importlib.util as iu
+
+    from kesbrdf.cli.main import main
+
+    real = iu.find_spec
+    monkeypatch.setattr(iu, "find_spec", lambda name, *a: None if name == "bpy" else real(name, *a))
+    path = tmp_path / "m.kes.json"
+    kes_model.save(path)
+    assert main(["export", str(path), "--format", "gltf", "-o", str(tmp_path / "x.gltf"), "--check-look"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "kesbrdf[blender]" in err[0]
+    assert not (tmp_path / "x.gltf").exists()

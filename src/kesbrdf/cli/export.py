@@ -82,11 +82,10 @@ def run(args) -> int:
         return 0
     if not args.model or not args.fmt or not args.output:
         raise ExportError("export: expected MODEL, --format FMT and -o OUT (or --list)")
-    if args.check_look:
-        from kesbrdf.export.looks import RENDERERS
+    if args.check_look:  # before the (slow) export: a renderer for the format, and installed
+        from kesbrdf.export.looks import require_renderer
 
-        if args.fmt not in RENDERERS:  # before the (slow) export
-            raise ExportError(f"--check-look: expected a format with a renderer ({', '.join(RENDERERS)}), got {args.fmt!r}")
+        require_renderer(args.fmt)
     result = export(args.model, args.fmt, args.output, **parse_options(args.option))
     for p in result.paths:
         size = p.stat().st_size if p.is_file() else 0

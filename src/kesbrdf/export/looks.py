@@ -69,6 +69,7 @@ __all__ = [
     "openpbr_to_principled",
     "read_openpbr",
     "check_look",
+    "require_renderer",
     "PluginReference",
     "compare_export",
     "check_looks",
@@ -286,6 +287,15 @@ def render_plugin(model_path, scene: dict, opts: LookOptions, seed: int | None =
 
 
 # -- Blender ---------------------------------------------------------------------------------
+def require_renderer(fmt: str) -> None:
+    """A one-line :class:`ExportError` when ``fmt`` has no renderer here or its renderer
+    is not installed (checked before any export work)."""
+    if fmt not in RENDERERS:
+        raise ExportError(f"--check-look: expected a format with a renderer ({', '.join(RENDERERS)}), got {fmt!r}")
+    if fmt != "rgl-bsdf":
+        _require_bpy()
+
+
 def _require_bpy() -> None:
     if importlib.util.find_spec("bpy") is None:
         raise ExportError("the look check in Blender needs the 'bpy' module (Blender 4.5 as a Python module): "
@@ -323,8 +333,12 @@ def blender_render(scene: dict, material: dict, opts: LookOptions, workdir) -> t
     src = str(Path(__file__).resolve().parents[2])
     env["PYTHONPATH"] = src + (os.pathsep + env["PYTHONPATH"] if env.get("PYTHONPATH") else "")
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, "-m", "kesbrdf.export.blender_look", str(job_path)], env=env,
-                          capture_output=True, text=True, timeout=BLENDER_TIMEOUT_S)
+    try:
+        proc = subprocess.run([sys.executable, "-m", "kesbrdf.export.blender_look", str(job_path)], env=env,
+                              capture_output=True, text=True, timeout=BLENDER_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise ExportError(f"Blender render: expected to finish within {BLENDER_TIMEOUT_S} s, it did not "
+                          f"(job {job_path})") from None
     if proc.returncode != 0 or not Path(job["output"]).is_file():
         tail = [ln for ln in (proc.stderr or "").splitlines() if ln.strip()][-1:] or ["no output"]
         raise ExportError(f"Blender render failed (exit {proc.returncode}): {tail[0]}")
