@@ -278,11 +278,18 @@ def _render_mitsuba(scene: dict, fabric_bsdf: dict, opts: LookOptions, seed: int
     return arr[..., :3], mask
 
 
+#: The plugin's lobe beyond the last measured deviation for the reference render: "hold",
+#: the model as :func:`kesbrdf.brdf.evaluate` gives it and as every export encodes it
+#: (``kesbrdf render`` fades it by default, a rendering choice no export carries).
+REFERENCE_EXTRAPOLATION = "hold"
+
+
 def render_plugin(model_path, scene: dict, opts: LookOptions, seed: int | None = None, want_mask: bool = False):
-    """The model itself through its kesbrdf plugin (:func:`kesbrdf.render.scenes.bsdf_dict`)."""
+    """The model itself through its kesbrdf plugin (:func:`kesbrdf.render.scenes.bsdf_dict`),
+    extrapolation :data:`REFERENCE_EXTRAPOLATION`."""
     from kesbrdf.render.scenes import RenderOptions, bsdf_dict
 
-    bsdf = bsdf_dict(Path(model_path), RenderOptions())
+    bsdf = bsdf_dict(Path(model_path), RenderOptions(extrapolation=REFERENCE_EXTRAPOLATION))
     return _render_mitsuba(scene, bsdf, opts, opts.seed if seed is None else seed, want_mask)
 
 
