@@ -19,6 +19,9 @@ $(VENV)/.installed: pyproject.toml
 	python3 -m venv $(VENV)
 	$(PIP) install -q --upgrade pip
 	$(PIP) install -q -e '.[all]'
+	# Blender 4.5 as a module (the `blender` extra, for kesbrdf.export.looks) without its
+	# numpy<2 pin: it runs on numpy 2 (docs/decisions.md, "bpy outside [all]")
+	$(PIP) install -q --no-deps 'bpy>=4.5,<4.6'
 	touch $@
 
 venv: system $(VENV)/.installed

@@ -153,6 +153,10 @@ def run(args) -> int:
         plan_result = _demo_prior.small_plan(reference, say)
 
     comparisons = [] if args.quick else _comparisons(out, reference, say)
+    looks = None
+    if not args.quick:
+        exported = _exports(out, kes_model, say)
+        looks = _looks(out, model_path, exported, say)
 
     # figures + report
     if _have("matplotlib") and _have("kesbrdf.plotting.report"):
@@ -172,12 +176,12 @@ def run(args) -> int:
             plan=plan_result,
             baselines=summary.get("default_vs_baselines"),
             prior_model=model if model.kind == "fibre-prior" else prior_part.get("prior_model"),
+            looks=looks,
         )
     else:
         say("figures + report skipped (install kesbrdf[plot])")
 
     if not args.quick:
-        _exports(out, kes_model, say)
         _renders(out, model_path, say)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
@@ -200,8 +204,10 @@ def run(args) -> int:
 DEMO_FIT_GRID = ((6, 12), (10, 20))
 
 
-def _exports(out: Path, model, say) -> None:
-    """Every export format into out/exports/<format>/ (docs/exports.md), with where it opens."""
+def _exports(out: Path, model, say) -> dict:
+    """Every export format into out/exports/<format>/ (docs/exports.md), with where it opens.
+
+    Returns {format: main file} of the formats written."""
     import inspect
 
     from kesbrdf._atomic import write_text
@@ -223,6 +229,27 @@ def _exports(out: Path, model, say) -> None:
         say(f"export {fmt}: {result.paths[0]} ({size:.1f} MiB); open with: {result.open_with}")
     if summary:
         write_text(out / "exports" / "exports.json", json.dumps(summary, indent=1) + "\n")
+    return {fmt: Path(s["paths"][0]) for fmt, s in summary.items()}
+
+
+#: The exports whose look the demo measures, each in the renderer that reads it
+#: (kesbrdf.export.looks.RENDERERS; glb is the same material as gltf).
+LOOK_FORMATS = ("rgl-bsdf", "gltf", "mtlx", "usd")
+
+
+def _looks(out: Path, model_path: Path, exported: dict, say):
+    """Each export rendered where it is used vs the plugin render: out/exports.json and out/looks/."""
+    if not (_have("mitsuba") and _have("flip_evaluator")):
+        say("export looks skipped (install kesbrdf[render] and flip-evaluator)")
+        return None
+    from kesbrdf._atomic import write_text
+    from kesbrdf.export.looks import check_looks
+
+    files = {fmt: exported[fmt] for fmt in LOOK_FORMATS if fmt in exported}
+    say(f"export looks: {', '.join(files)} in their renderers vs the kesbrdf plugin (Mitsuba, Blender Cycles)")
+    result = check_looks(model_path, files, out / "looks", progress=lambda line: stderr(f"    {line}"))
+    write_text(out / "exports.json", json.dumps(result, indent=1, default=str) + "\n")
+    return result
 
 
 def _comparisons(out: Path, reference, say) -> list:

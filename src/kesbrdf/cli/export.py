@@ -16,6 +16,10 @@ def add_arguments(p):
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="format option (VALUE read as JSON when it parses, else as text); repeatable")
     p.add_argument("--list", action="store_true", help="list the export formats and exit")
+    p.add_argument("--check-look", action="store_true",
+                   help="render the export in its own renderer (Mitsuba measured, Blender Cycles) and compare "
+                        "it with the kesbrdf plugin's render of the model: FLIP, relative RMSE, noise floor "
+                        "(docs/exports.md)")
 
 
 def parse_options(items) -> dict:
@@ -94,6 +98,10 @@ def run(args) -> int:
         return 0
     if not args.model or not args.fmt or not args.output:
         raise ExportError("export: expected MODEL, --format FMT and -o OUT (or --list)")
+    if args.check_look:  # before the (slow) export: a renderer for the format, and installed
+        from kesbrdf.export.looks import require_renderer
+
+        require_renderer(args.fmt)
     result = export(args.model, args.fmt, args.output, **parse_options(args.option))
     for p in result.paths:
         size = p.stat().st_size if p.is_file() else 0
@@ -107,4 +115,12 @@ def run(args) -> int:
     if result.open_with:
         print(f"open with: {result.open_with}")
     stderr(f"exported {args.model} as {result.format}")
+    if args.check_look:
+        from kesbrdf.export.looks import check_look, look_line
+
+        look = check_look(args.model, result.format, result.paths[0])
+        for row in look["rows"]:
+            print(look_line(row))
+            if "side_by_side" in row.get("images", {}):
+                print(f"wrote {row['images']['side_by_side']}")
     return 0

@@ -23,6 +23,7 @@ index are written for information in ``extras.kesbrdf.specular``.
 from __future__ import annotations
 
 import base64
+import math
 from pathlib import Path
 
 import numpy as np
@@ -74,8 +75,33 @@ def _fit_extras(fit) -> dict:
     }
 
 
-def build_gltf(fit, meshes, model_info: dict | None = None):
-    """A ``pygltflib.GLTF2`` with the fitted material on ``meshes`` (one node each)."""
+#: Angle (radians) of the constant anisotropyTexture's direction (255, 128) from the
+#: tangent: 8 bits cannot store 0 exactly (128/255·2 − 1 = 1/255).  0.22°, far below any
+#: fabric lobe's width; written in ``extras.kesbrdf`` for the record.
+TEXTURE_DIRECTION_OFFSET = math.atan2(1.0 / 255.0, 1.0)
+
+
+def _constant_png(rgb) -> bytes:
+    """A 1x1 8-bit RGB PNG of colour ``rgb`` (stdlib zlib; no imaging library needed)."""
+    import struct
+    import zlib
+
+    def chunk(tag, data):
+        return struct.pack(">I", len(data)) + tag + data + struct.pack(">I", zlib.crc32(tag + data) & 0xFFFFFFFF)
+
+    raw = b"\0" + bytes(int(c) for c in rgb)
+    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", 1, 1, 8, 2, 0, 0, 0))
+            + chunk(b"IDAT", zlib.compress(raw)) + chunk(b"IEND", b""))
+
+
+def build_gltf(fit, meshes, model_info: dict | None = None, anisotropy_texture: bool = True):
+    """A ``pygltflib.GLTF2`` with the fitted material on ``meshes`` (one node each).
+
+    ``anisotropy_texture`` adds a constant 1x1 ``anisotropyTexture`` (direction = the
+    mesh tangent, strength x1): by the extension's text the same material, but Blender's
+    importer reads the tangent from the UV map only when there is such a texture, and
+    otherwise uses its default radial tangent, off the warp on most meshes
+    (docs/exports.md, "Exports in their renderers")."""
     import pygltflib as g
 
     from kesbrdf.export.gltf_pbr import EXTENSIONS, IOR, equivalent_ior, material_json, specular_f0
@@ -120,8 +146,29 @@ def build_gltf(fit, meshes, model_info: dict | None = None):
     }
     if model_info:
         extras["kesbrdf"]["model"] = model_info
-    material = g.Material(**_material_kwargs(material_json(fit.params, extras=extras)))
+    mj = material_json(fit.params, extras=extras)
+    textures = {}
+    if anisotropy_texture:
+        # a 1x1 constant anisotropyTexture (direction (1, 0) = the mesh tangent, strength x1):
+        # the same material by the extension's text, but importers that ignore TANGENT without
+        # a texture (Blender's takes the tangent from the UV map only then) follow the warp
+        png = _constant_png((255, 128, 255))
+        view = len(buffer_views)
+        offset = len(blob)
+        blob.extend(png)
+        blob.extend(b"\0" * (-len(blob) % 4))
+        buffer_views.append(g.BufferView(buffer=0, byteOffset=offset, byteLength=len(png)))
+        textures = {"images": [g.Image(bufferView=view, mimeType="image/png", name="anisotropy_warp")],
+                    "samplers": [g.Sampler(magFilter=9728, minFilter=9728)],
+                    "textures": [g.Texture(sampler=0, source=0, name="anisotropy_warp")]}
+        mj["extensions"]["KHR_materials_anisotropy"]["anisotropyTexture"] = {"index": 0, "texCoord": 0}
+        mj["extras"]["kesbrdf"]["anisotropy_texture"] = (
+            "constant (255, 128, 255): direction = TANGENT (offset "
+            f"{math.degrees(TEXTURE_DIRECTION_OFFSET):.2f} deg from 8-bit rounding), strength x1; "
+            "present so that importers which ignore TANGENT without a texture (Blender) follow the UV map")
+    material = g.Material(**_material_kwargs(mj))
     gltf = g.GLTF2(
+        **textures,
         asset=g.Asset(version="2.0", generator="kesbrdf export"),
         scene=0,
         scenes=[g.Scene(name="kesbrdf preview", nodes=list(range(len(nodes))))],

@@ -359,6 +359,37 @@ def _comparisons_html(comparisons) -> str:
     return "<h2 id=renders>Reference vs model renders</h2>" + intro + "".join(items)
 
 
+def _looks_html(looks) -> str:
+    """Section "Exports in their renderers" (:mod:`kesbrdf.export.looks`).
+
+    ``looks``: :func:`kesbrdf.export.looks.check_looks` output; each row's
+    ``images.side_by_side`` PNG (plugin | export | FLIP) is embedded with its line;
+    skipped formats get their reason, rows whose image file is missing are left out.
+    """
+    rows = (looks or {}).get("rows") or []
+    items, lines = [], []
+    for r in rows:
+        if "skipped" in r:
+            lines.append(f"<li>{html.escape(r['format'])}: not rendered ({html.escape(str(r['skipped']))})</li>")
+            continue
+        line = (f"{r['format']} in {r['renderer']}: FLIP {float(r['flip']):.3f}, relative RMSE "
+                f"{float(r['rel_rmse']):.3f} against the measured model (noise floor FLIP "
+                f"{float(r['noise_flip']):.3f}, relative RMSE {float(r['noise_rel_rmse']):.3f})")
+        lines.append(f"<li>{html.escape(line)}</li>")
+        side = Path(str(r.get("images", {}).get("side_by_side", "")))
+        if side.is_file():
+            b64 = base64.b64encode(side.read_bytes()).decode("ascii")
+            items.append(f'<figure class="compare"><img alt="{html.escape(r["format"])} in its renderer" '
+                         f'src="data:image/png;base64,{b64}"><figcaption>{html.escape(line)}</figcaption></figure>')
+    if not lines:
+        return ""
+    intro = ("<p>Each export rendered by the tool that reads it (right) next to the kesbrdf Mitsuba plugin's "
+             "render of the model (left), same scene, camera and studio lights; FLIP error map on the right. "
+             "FLIP (displayed images) and relative RMSE (linear) are over the fabric pixels; the noise floor "
+             "is the same comparison between two seeds of the plugin.</p>")
+    return "<h2 id=exports>Exports in their renderers</h2>" + intro + "<ul>" + "".join(lines) + "</ul>" + "".join(items)
+
+
 def build_report(
     model=None,
     measurement=None,
@@ -375,6 +406,7 @@ def build_report(
     plan=None,
     baselines=None,
     prior_model=None,
+    looks=None,
 ) -> str:
     """The report as one HTML string (see :func:`write_report` for the parameters)."""
     from kesbrdf.plotting.figures import make_figure
@@ -426,6 +458,7 @@ def build_report(
 
     parts.append(sections_html(model, measurement, reference, plan, baselines, prior_model, dpi))
     parts.append(_comparisons_html(comparisons))
+    parts.append(_looks_html(looks))
 
     # -- metrics and diagnostics
     if metrics is not None:
@@ -482,6 +515,7 @@ def write_report(
     plan=None,
     baselines=None,
     prior_model=None,
+    looks=None,
 ) -> Path:
     """Write one self-contained HTML report atomically.
 
@@ -520,6 +554,9 @@ def write_report(
         The model comparison table (``model.diagnostics["fit_report"]["comparison"]``)
         and, for a model carrying σ, its uncertainty map are added automatically
         (:mod:`kesbrdf.plotting.report_prior`).
+    looks : dict, optional
+        :func:`kesbrdf.export.looks.check_looks` output: the section "Exports in their
+        renderers" (each export in its renderer beside the plugin render, with FLIP).
 
     Returns
     -------
@@ -527,7 +564,7 @@ def write_report(
     """
     text = build_report(
         model, measurement, reference, metrics, diagnostics, title, figures, figure_dir,
-        figure_format, dpi, figure_options, comparisons, plan, baselines, prior_model,
+        figure_format, dpi, figure_options, comparisons, plan, baselines, prior_model, looks,
     )
     return write_text(path, text)
 
