@@ -61,6 +61,9 @@ PARAMETERS: dict[str, dict[str, tuple]] = {
     **{f"sadeghi-{p}": _SADEGHI for p in ("linen", "silk-crepe", "satin-back", "silk-shot", "velvet")},
     **{f"rgl-felt-{c}": {"parameterised_by": ("choice", ("light", "viewer"), None, False)}
        for c in ("white", "pink", "purple")},
+    # references given as a file path (kesbrdf.references.registry.is_reference_path)
+    "rgl-file": {"parameterised_by": ("choice", ("light", "viewer"), None, False)},
+    "merl-file": {},
 }
 
 
