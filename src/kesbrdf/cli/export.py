@@ -1,4 +1,7 @@
-"""``kesbrdf export MODEL --format FMT -o OUT``: write a model in another tool's format."""
+"""``kesbrdf export MODEL -o OUT [--format FMT]``: write a model in another tool's format.
+
+Without ``--format`` the format comes from OUT's ending (:mod:`kesbrdf.export.endings`).
+"""
 
 from __future__ import annotations
 
@@ -11,7 +14,9 @@ HELP = "Export a model for other tools (Mitsuba/pbrt .bsdf, Mitsuba scene, ...);
 
 def add_arguments(p):
     p.add_argument("model", nargs="?", help="model file (.kes.json)")
-    p.add_argument("--format", "-f", dest="fmt", help="export format (see --list)")
+    p.add_argument("--format", "-f", dest="fmt",
+                   help="export format (see --list); default: from the ending of -o (.gltf, .glb, .mtlx, .usda/.usd, "
+                   ".xml, .brdf; .bsdf needs rgl-bsdf or rgl-bsdf-spectral)")
     p.add_argument("-o", "--output", help="file to write")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="format option (VALUE read as JSON when it parses, else as text); repeatable")
@@ -47,23 +52,46 @@ def _number(v) -> str:
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _records(label: str, value: dict) -> list[tuple[str, list]]:
+    """(label, [(name, number), ...]) of one nested agreement entry.
+
+    An analytic fit (``material``, ``params``, ``error``) gives its error numbers; a
+    dict of such records per variant (MaterialX: ``openpbr``, ``standard_surface``)
+    gives one record per variant; a plain dict gives its numbers.
+    """
+    if isinstance(value.get("error"), dict):
+        label = f"{label} {value['material']}" if isinstance(value.get("material"), str) else label
+        return [(label, [(k, v) for k, v in value["error"].items() if _is_number(v)])]
+    if value and all(isinstance(v, dict) for v in value.values()):
+        return [r for sub, v in value.items()
+                for r in _records(label if isinstance(v.get("material"), str) else f"{label} {sub}", v)]
+    return [(label, [(k, v) for k, v in value.items() if _is_number(v)])]
+
+
 def agreement_line(agreement: dict) -> str:
     """One readable line of an export's agreement with the model.
 
     Scalars print as ``name=value``; a nested record (an analytic fit: material,
     parameters, error) prints only its error numbers, e.g. ``fit gltf_pbr: nrmse 0.528,
-    nrmse_theta_le_70 0.46``.  The parameters are in the exported file itself.
+    nrmse_theta_le_70 0.46``, one record per variant when the export holds several
+    (MaterialX, USD).  The parameters are in the exported file itself; ``fit_error``,
+    the short copy of ``fit``'s errors that the analytic formats also report, is left
+    out when ``fit`` is there.
     """
     parts = []
     for key, value in agreement.items():
+        if key == "fit_error" and isinstance(agreement.get("fit"), dict):
+            continue
         if not isinstance(value, dict):
             parts.append(f"{key}={_number(value)}")
             continue
-        err = value.get("error") if isinstance(value.get("error"), dict) else value
-        numbers = ", ".join(f"{k} {_number(v)}" for k, v in err.items()
-                            if isinstance(v, (int, float)) and not isinstance(v, bool))
-        label = f"{key} {value['material']}" if isinstance(value.get("material"), str) else key
-        parts.append(f"{label}: {numbers}" if numbers else label)
+        for label, numbers in _records(key, value):
+            text = ", ".join(f"{k} {_number(v)}" for k, v in numbers)
+            parts.append(f"{label}: {text}" if text else label)
     return "; ".join(parts)
 
 
@@ -76,9 +104,12 @@ def run(args) -> int:
             module = format_module(name)
             print(f"{name:24s} {getattr(module, 'HELP', '')}")
         return 0
-    if not args.model or not args.fmt or not args.output:
-        raise ExportError("export: expected MODEL, --format FMT and -o OUT (or --list)")
-    result = export(args.model, args.fmt, args.output, **parse_options(args.option))
+    from kesbrdf.export.endings import resolve_format
+
+    if not args.model or not args.output:
+        raise ExportError("export: expected MODEL and -o OUT (format from its ending, or --format FMT), or --list")
+    fmt = resolve_format(args.fmt, args.output)
+    result = export(args.model, fmt, args.output, **parse_options(args.option))
     for p in result.paths:
         size = p.stat().st_size if p.is_file() else 0
         print(f"wrote {p} ({_size(size)})")
