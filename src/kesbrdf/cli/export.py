@@ -49,6 +49,8 @@ def _size(n: int) -> str:
 
 
 def _number(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_number(x) for x in v)
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
