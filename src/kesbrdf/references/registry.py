@@ -67,7 +67,7 @@ def rgl_path(name: str) -> Path:
             return p
     raise KesbrdfError(
         f"reference {name!r}: expected {RGL_FILES[name]} in {', '.join(str(d) for d in RGL_DIRS)} "
-        "(set KESBRDF_RGL_DIR), found none"
+        "(set KESBRDF_RGL_DIR to the folder holding it, or give the file's path as the reference), found none"
     )
 
 
