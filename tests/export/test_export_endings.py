@@ -74,7 +74,8 @@ def test_mtlx_and_usd_print_their_fit_error_numbers(tmp_path, kes_model, fits, f
     if fmt == "usd":
         pytest.importorskip("pxr")
     variants = {"mtlx": ("openpbr", "standard_surface"), "usd": ("openpbr",)}[fmt]
-    result = export(kes_model, fmt, tmp_path / name, fits={v: fits[v] for v in fits if v in ("openpbr", "standard_surface")})
+    analytic = {v: fits[v] for v in fits if v in ("openpbr", "standard_surface")}
+    result = export(kes_model, fmt, tmp_path / name, fits=analytic)
     line = agreement_line(result.agreement)
     assert "\n" not in line and "exact=False" in line
     for v in variants:

@@ -92,7 +92,10 @@ def resolve_format(fmt: str | None, out) -> str:
         return fmt
     table = endings()
     ext = _ending_of(name, table)
-    belongs = f"the ending of {' / '.join(table[ext])}: drop --format or change it" if ext else "an ending no format writes"
+    if ext:
+        belongs = f"the ending of {' / '.join(table[ext])}: drop --format or change it"
+    else:
+        belongs = "an ending no format writes"
     raise ExportError(
         f"--format {fmt}: expected an output file ending in {' or '.join(own)}, got {Path(out).name!r} ({belongs})"
     )

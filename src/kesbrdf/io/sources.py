@@ -135,7 +135,12 @@ def detect(path) -> str:
     numeric = bool(fields) and all(re.fullmatch(r"[-+0-9.eE]+", f) for f in fields)
     if numeric and (path.parent / CURET_TABLE).is_file():
         return "curet"
-    got = "an empty file" if not head else ("binary data" if "\ufffd" in text or "\0" in text else f"text starting {first[:40]!r}")
+    if not head:
+        got = "an empty file"
+    elif "\ufffd" in text or "\0" in text:
+        got = "binary data"
+    else:
+        got = f"text starting {first[:40]!r}"
     raise FormatError(f"{where(path)}expected {describe_kinds()}; got {got}")
 
 
@@ -258,7 +263,9 @@ def read_source(path, *, sample=None, protocol: str | None = None, step_deg: flo
         sample=_table_sample_name(brdf, path),
     )
     sha = getattr(brdf, "sha256", None) or hashlib.sha256(path.read_bytes()).hexdigest()
-    m.metadata["resampled_from"] = f"{path.name} sha256:{sha} ({kind}, measured data sampled at the protocol's geometries)"
+    m.metadata["resampled_from"] = (
+        f"{path.name} sha256:{sha} ({kind}, measured data sampled at the protocol's geometries)"
+    )
     m.source = str(path)
     m.sha256 = sha
     return m
