@@ -151,3 +151,14 @@ def test_simulate_reference_bad_path_is_one_line(tmp_path, capsys):
     assert "nope.bsdf" in _one_error_line(capsys)
     assert main(["simulate", "--reference", str(CURET_EXTRACT), "-o", str(tmp_path / "s.csv")]) == 2
     assert "RGL .bsdf / MERL .binary" in _one_error_line(capsys)
+
+
+def test_plot_reference_path(tmp_path, capsys):
+    """The follow-up of ``fit felt.bsdf``: Fig. 6 against the same file given by path."""
+    model_path = tmp_path / "felt.kes.json"
+    assert main(["fit", str(RGL_FELT), "--no-compare", "-o", str(model_path)]) == 0
+    out = tmp_path / "fig6.png"
+    assert main(["plot", str(model_path), "--reference", str(RGL_FELT), "--figure", "6", "-o", str(out)]) == 0
+    assert out.stat().st_size > 1000
+    assert main(["plot", str(model_path), "--reference", "banana", "--figure", "6", "-o", str(tmp_path / "b.png")]) == 2
+    assert "expected one of ward" in _one_error_line(capsys)
