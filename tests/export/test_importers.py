@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from kesbrdf.errors import FormatError
+from source_helpers import merl_bin_centres, pairs_from_half_diff, write_merl
 
 FELT = Path(__file__).resolve().parents[1] / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None
@@ -68,42 +69,19 @@ def test_numpy_reader_rejects_bad_files(tmp_path):
 
 
 # -- MERL .binary -------------------------------------------------------------------------
-def _bin_centres():
-    """(θ_h, θ_d, φ_d) at every bin centre, each (90, 90, 180), inverting the bin mapping."""
-    from kesbrdf.references.merl import DIMS
-
-    i = (np.arange(DIMS[0]) + 0.5) / DIMS[0]
-    j = (np.arange(DIMS[1]) + 0.5) / DIMS[1]
-    k = (np.arange(DIMS[2]) + 0.5) / DIMS[2]
-    return np.meshgrid(i**2 * np.pi / 2, j * np.pi / 2, k * np.pi, indexing="ij")
-
-
-def _pairs_from_half_diff(theta_h, theta_d, phi_d):
-    """ω_i, ω_r (n, 3) with φ_h = 0: ω_i = R_y(θ_h) d, ω_r = reflect(ω_i, h)."""
-    th, td, pd = (np.ravel(a) for a in (theta_h, theta_d, phi_d))
-    d = np.stack([np.sin(td) * np.cos(pd), np.sin(td) * np.sin(pd), np.cos(td)], -1)
-    c, s = np.cos(th), np.sin(th)
-    wi = np.stack([c * d[:, 0] + s * d[:, 2], d[:, 1], -s * d[:, 0] + c * d[:, 2]], -1)
-    h = np.stack([s, np.zeros_like(s), c], -1)
-    wr = 2 * np.sum(wi * h, -1, keepdims=True) * h - wi
-    return wi, wr
+_bin_centres = merl_bin_centres
+_pairs_from_half_diff = pairs_from_half_diff
 
 
 @pytest.fixture(scope="module")
 def merl_file(tmp_path_factory):
     """A full-size synthetic MERL file of an isotropic Ward + Lambert BRDF (35 MB, written here)."""
-    from kesbrdf.references.merl import DIMS, SCALE
     from kesbrdf.references.ward import AnisotropicWard
 
     truth = AnisotropicWard(0.25, 0.25, rho_d=[0.3, 0.2, 0.1], rho_s=0.15)
-    wi, wr = _pairs_from_half_diff(*_bin_centres())
-    f = truth(wi, wr)  # (n, 3)
-    below = (wi[:, 2] <= 0) | (wr[:, 2] <= 0)
-    values = f / SCALE
-    values[below] = -1.0  # missing, as in the database
     path = tmp_path_factory.mktemp("merl") / "ward.binary"
-    path.write_bytes(np.array(DIMS, "<i4").tobytes() + np.ascontiguousarray(values.T, "<f8").tobytes())
-    return path, truth, float(below.mean())
+    missing = write_merl(path, truth)
+    return path, truth, missing
 
 
 def test_merl_exact_at_bin_centres(merl_file, rng):

@@ -276,3 +276,34 @@ def test_simulate_params_accepted_or_typed_error(data, reference):
     f = _run("simulate_params", build)
     if f is not None:
         assert np.all(np.isfinite(f)) and np.all(f >= 0)
+
+
+# -- any input by path (kesbrdf.io.sources: fit / convert) ------------------------------
+def _source_seeds():
+    from kesbrdf.io.tensor_file import tensor_file_bytes
+    from kesbrdf.references.merl import DIMS
+
+    tensor = tensor_file_bytes({"theta_i": np.linspace(0, 1.5, 3).astype("<f4"), "description": "fuzz"})
+    merl = np.array(DIMS, "<i4").tobytes() + np.zeros(8, "<f8").tobytes()  # right header, truncated body
+    return [MEASUREMENT_SEEDS[1], CURET_ABRDF, tensor, merl]
+
+
+@settings(max_examples=examples(TEXT_EXAMPLES))
+@given(data=mutated(_source_seeds()), name=st.sampled_from(["in.csv", "abrdf.dat", "in.bsdf", "in.binary", "in"]))
+def test_any_input_loads_or_raises_typed_error(work, data, name):
+    from kesbrdf.io.sources import detect, read_source
+
+    folder = work / "sources"
+    folder.mkdir(exist_ok=True)
+    for old in folder.iterdir():
+        old.unlink()
+    (folder / "table.txt").write_bytes(CURET_TABLE)
+    path = folder / name
+    path.write_bytes(data)
+
+    def read():
+        return read_source(path, sample=42 if detect(path) == "curet" else None)
+
+    m = _run("sources", read)
+    if m is not None:
+        assert len(m) > 0 and np.all(np.isfinite(m.values))

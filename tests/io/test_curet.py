@@ -15,6 +15,7 @@ from kesbrdf.brdf import to_phi_gamma
 from kesbrdf.errors import FormatError, MeasurementError
 from kesbrdf.io.curet import FABRICS, N_CONFIGURATIONS, read_curet
 from kesbrdf.io.measurement_csv import read_measurement
+from source_helpers import write_curet
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 EXTRACT = DATA / "curet_fabrics.csv"
@@ -33,24 +34,7 @@ def extract():
 
 def _write_original(tmp_path, extract, samples=(1, 42), negative_at=None):
     """table.txt and abrdf.dat in CUReT's own layout, from the extract."""
-    th_v, ph_v = extract.theta_r, extract.phi_r
-    th_i, ph_i = extract.theta_i, extract.phi_i
-    # CUReT prints azimuths in (−π, π]
-    wrap = lambda p: np.where(p > np.pi, p - 2 * np.pi, p)  # noqa: E731
-    lines = [
-        f"{k + 1}     {th_v[k]:.6f}   {wrap(ph_v[k]):.6f}   {th_i[k]:.6f}   {wrap(ph_i[k]):.6f}"
-        for k in range(len(extract))
-    ]
-    (tmp_path / "table.txt").write_text("\n".join(lines) + "\n")
-    rows = []
-    for s in samples:
-        col = [c for c in extract.channels if c.startswith(f"band_s{s:02d}_")][0]
-        v = extract.values[:, extract.channels.index(col)].copy()
-        if negative_at is not None and s == samples[0]:
-            v[negative_at] = -0.016
-        rows.append(f"{s}    " + "   ".join(f"{x:.3f}" for x in v))
-    (tmp_path / "abrdf.dat").write_text("\n".join(rows) + "\n")
-    return tmp_path / "table.txt", tmp_path / "abrdf.dat"
+    return write_curet(tmp_path, extract, samples=samples, negative_at=negative_at)
 
 
 def test_extract_holds_every_fabric(extract):

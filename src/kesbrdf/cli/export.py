@@ -1,4 +1,7 @@
-"""``kesbrdf export MODEL --format FMT -o OUT``: write a model in another tool's format."""
+"""``kesbrdf export MODEL -o OUT [--format FMT]``: write a model in another tool's format.
+
+Without ``--format`` the format comes from OUT's ending (:mod:`kesbrdf.export.endings`).
+"""
 
 from __future__ import annotations
 
@@ -11,7 +14,9 @@ HELP = "Export a model for other tools (Mitsuba/pbrt .bsdf, Mitsuba scene, ...);
 
 def add_arguments(p):
     p.add_argument("model", nargs="?", help="model file (.kes.json)")
-    p.add_argument("--format", "-f", dest="fmt", help="export format (see --list)")
+    p.add_argument("--format", "-f", dest="fmt",
+                   help="export format (see --list); default: from the ending of -o (.gltf, .glb, .mtlx, .usda/.usd, "
+                   ".xml, .brdf; .bsdf needs rgl-bsdf or rgl-bsdf-spectral)")
     p.add_argument("-o", "--output", help="file to write")
     p.add_argument("--option", "-O", action="append", default=[], metavar="KEY=VALUE",
                    help="format option (VALUE read as JSON when it parses, else as text); repeatable")
@@ -48,22 +53,33 @@ def _size(n: int) -> str:
 
 
 def _number(v) -> str:
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_number(x) for x in v)
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
-def _record(label: str, value: dict) -> str:
-    """``label: name number, ...[, at bound: ...]`` of one (possibly per-variant) error record."""
-    err = value.get("error") if isinstance(value.get("error"), dict) else value
-    numbers = [f"{k} {_number(v)}" for k, v in err.items() if isinstance(v, (int, float)) and not isinstance(v, bool)]
-    bounds = err.get("at_bounds")
-    if isinstance(bounds, list) and bounds:
-        numbers.append("at bound: " + ", ".join(map(str, bounds)))
-    if isinstance(value.get("material"), str):
-        label = f"{label} {value['material']}"
-    if numbers:
-        return f"{label}: {', '.join(numbers)}"
-    subs = [_record(f"{label} {k}", v) for k, v in value.items() if isinstance(v, dict)]
-    return "; ".join(subs) if subs else label
+def _is_number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _records(label: str, value: dict) -> list[tuple[str, list]]:
+    """(label, [(name, number), ...]) of one nested agreement entry.
+
+    An analytic fit (``material``, ``params``, ``error``) gives its error numbers; a
+    dict of such records per variant (MaterialX: ``openpbr``, ``standard_surface``)
+    gives one record per variant; a plain dict gives its numbers.
+    """
+    if isinstance(value.get("error"), dict):
+        label = f"{label} {value['material']}" if isinstance(value.get("material"), str) else label
+        numbers = [(k, v) for k, v in value["error"].items() if _is_number(v)]
+        bounds = value["error"].get("at_bounds")
+        if isinstance(bounds, list) and bounds:
+            numbers.append(("at bound:", ", ".join(map(str, bounds))))
+        return [(label, numbers)]
+    if value and all(isinstance(v, dict) for v in value.values()):
+        return [r for sub, v in value.items()
+                for r in _records(label if isinstance(v.get("material"), str) else f"{label} {sub}", v)]
+    return [(label, [(k, v) for k, v in value.items() if _is_number(v)])]
 
 
 def agreement_line(agreement: dict) -> str:
@@ -71,19 +87,22 @@ def agreement_line(agreement: dict) -> str:
 
     Scalars print as ``name=value``; a nested record (an analytic fit: material,
     parameters, error) prints only its error numbers, e.g. ``fit gltf_pbr: nrmse 0.528,
-    nrmse_theta_le_70 0.46``, and the parameters that ended at a bound of their
-    physical range (``at bound: ior max``); per-variant records (MaterialX, USD) print
-    one part each.  When a short ``fit_error`` record is there, the full ``fit`` record
-    is left out.  The parameters are in the exported file itself.
+    nrmse_theta_le_70 0.46``, one record per variant when the export holds several
+    (MaterialX, USD), and the parameters that ended at a bound of their physical range
+    (``at bound: ior max``).  The parameters are in the exported file itself; ``fit_error``,
+    the short copy of ``fit``'s errors that the analytic formats also report, is left
+    out when ``fit`` is there.
     """
     parts = []
     for key, value in agreement.items():
-        if key == "fit" and isinstance(agreement.get("fit_error"), dict):
+        if key == "fit_error" and isinstance(agreement.get("fit"), dict):
             continue
         if not isinstance(value, dict):
             parts.append(f"{key}={_number(value)}")
             continue
-        parts.append(_record(key, value))
+        for label, numbers in _records(key, value):
+            text = ", ".join(f"{k} {_number(v)}" for k, v in numbers)
+            parts.append(f"{label}: {text}" if text else label)
     return "; ".join(parts)
 
 
@@ -96,13 +115,16 @@ def run(args) -> int:
             module = format_module(name)
             print(f"{name:24s} {getattr(module, 'HELP', '')}")
         return 0
-    if not args.model or not args.fmt or not args.output:
-        raise ExportError("export: expected MODEL, --format FMT and -o OUT (or --list)")
+    from kesbrdf.export.endings import resolve_format
+
+    if not args.model or not args.output:
+        raise ExportError("export: expected MODEL and -o OUT (format from its ending, or --format FMT), or --list")
+    fmt = resolve_format(args.fmt, args.output)
     if args.check_look:  # before the (slow) export: a renderer for the format, and installed
         from kesbrdf.export.looks import require_renderer
 
-        require_renderer(args.fmt)
-    result = export(args.model, args.fmt, args.output, **parse_options(args.option))
+        require_renderer(fmt)
+    result = export(args.model, fmt, args.output, **parse_options(args.option))
     for p in result.paths:
         size = p.stat().st_size if p.is_file() else 0
         print(f"wrote {p} ({_size(size)})")

@@ -1,4 +1,8 @@
-"""``kesbrdf fit MEAS.csv -o MODEL``: build a model with :func:`kesbrdf.fit`.
+"""``kesbrdf fit INPUT -o MODEL``: build a model with :func:`kesbrdf.fit`.
+
+INPUT is a measurement CSV, a CUReT ``abrdf.dat`` (``--sample``), an RGL ``.bsdf`` or a
+MERL ``.binary`` (sampled at ``--protocol``'s geometries), read by
+:func:`kesbrdf.io.sources.read_source`.
 
 The kind is chosen automatically (the one that uses every row, docs/models.md) unless
 ``--kind`` names one; the choice, the rows used and any warnings go to stderr.  Only
@@ -10,13 +14,17 @@ from __future__ import annotations
 
 from kesbrdf.cli._common import stderr
 
-HELP = "Fit a model to a measurement CSV (kind chosen from the data); writes a model file (.kes.json)."
+HELP = ("Fit a model to a measurement CSV, CUReT abrdf.dat, RGL .bsdf or MERL .binary (kind chosen from "
+        "the data); writes a model file (.kes.json).")
 
 
 def add_arguments(p):
+    from kesbrdf.cli._protocol import add_protocol_arguments
     from kesbrdf.kinds import known_fitters
 
-    p.add_argument("measurement", help="measurement CSV")
+    p.add_argument("measurement", metavar="INPUT",
+                   help="measurement CSV, CUReT abrdf.dat (table.txt beside it; --sample), RGL .bsdf or MERL "
+                   ".binary (recognised by content and ending; docs/formats.md)")
     p.add_argument("-o", "--output", required=True, help="model file to write")
     p.add_argument("--kind", choices=("auto",) + known_fitters(), default="auto",
                    help="auto (default): the kind that uses every row; kes: the paper's table rho(phi, gamma); "
@@ -38,6 +46,9 @@ def add_arguments(p):
                    help="kes kind: interpolation over phi (nearest/linear are baselines)")
     p.add_argument("--no-compare", action="store_true",
                    help="auto: skip the held-out comparison with the woven-cloth prior (fibre-prior)")
+    p.add_argument("--sample", default=None,
+                   help="CUReT input: the sample, by number (42) or fabric name (corduroy)")
+    add_protocol_arguments(p, default=None, what="at which an RGL .bsdf / MERL .binary is sampled (default paper)")
 
 
 def _options(args) -> dict:
@@ -66,10 +77,12 @@ def _options(args) -> dict:
 
 def run(args) -> int:
     import kesbrdf
-    from kesbrdf.io.measurement_csv import read_measurement
+    from kesbrdf.cli._protocol import orientations
+    from kesbrdf.io.sources import read_source
 
     options = _options(args)
-    m = read_measurement(args.measurement)
+    m = read_source(args.measurement, sample=args.sample, protocol=args.protocol, step_deg=args.step_deg,
+                    orientations_deg=orientations(args.orientations_deg))
     for note in m.notes:
         stderr(f"note: {args.measurement}: {note}")
     model, report = kesbrdf.fit(m, kind=args.kind, strict=args.strict, compare=not args.no_compare, **options)

@@ -25,6 +25,7 @@ from kesbrdf.errors import KesbrdfError
 COMMANDS: dict[str, str] = {
     "simulate": "simulate",
     "ingest": "ingest",
+    "convert": "convert",
     "fit": "fit",
     "eval": "eval_",
     "validate": "validate",

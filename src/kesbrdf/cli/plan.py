@@ -12,7 +12,8 @@ HELP = "Plan a measurement: expected hemisphere error of candidate protocols wit
 
 def add_arguments(p):
     p.add_argument("--reference", action="append", default=[], metavar="NAME",
-                   help=f"reference BRDF to plan for (repeatable): {', '.join(REFERENCES)}")
+                   help=f"reference BRDF to plan for (repeatable): {', '.join(REFERENCES)}, or an RGL .bsdf / MERL "
+                   ".binary path")
     p.add_argument("--model", action="append", default=[], metavar="MODEL",
                    help="fitted model file used as the truth (repeatable)")
     p.add_argument("--library", action="store_true", help="plan for every built-in reference")

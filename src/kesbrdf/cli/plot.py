@@ -14,7 +14,8 @@ FIGURE_CHOICES = ("3a", "3b", "4", "5", "6", "albedo", "all")
 def add_arguments(p):
     p.add_argument("model", help="model file (.kes.json)")
     p.add_argument("--measurement", help="measurement CSV: measured points in Fig. 3 and 4")
-    p.add_argument("--reference", choices=REFERENCES, help="reference BRDF compared in Fig. 6")
+    p.add_argument("--reference", metavar="NAME|PATH",
+                   help=f"reference BRDF compared in Fig. 6: {', '.join(REFERENCES)}, or an RGL .bsdf / MERL .binary path")
     p.add_argument("--reference-params", metavar="JSON", help="reference parameters as JSON, e.g. '{\"alpha_x\": 0.1}'")
     p.add_argument("--figure", choices=FIGURE_CHOICES, default="all", help="which figure (default all)")
     p.add_argument("-o", "--output", required=True,

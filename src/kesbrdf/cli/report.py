@@ -12,7 +12,9 @@ HELP = "Write one self-contained HTML report: the paper's figures, metrics, diag
 def add_arguments(p):
     p.add_argument("model", help="model file (.kes.json)")
     p.add_argument("--measurement", help="measurement CSV: metrics, leave-one-orientation-out, measured points")
-    p.add_argument("--reference", choices=REFERENCES, help="reference BRDF: Fig. 6 and KES against the baselines")
+    p.add_argument("--reference", metavar="NAME|PATH",
+                   help=f"reference BRDF: Fig. 6 and KES against the baselines; {', '.join(REFERENCES)}, or an RGL "
+                   ".bsdf / MERL .binary path")
     p.add_argument("--reference-params", metavar="JSON", help="reference parameters as JSON")
     p.add_argument("-o", "--output", required=True, help="report file (.html)")
     p.add_argument("--title", default=None, help="report title (default: from the model's sample name)")

@@ -3,19 +3,19 @@
 from __future__ import annotations
 
 from kesbrdf.cli._common import REFERENCES, check_output, make_reference, stderr
-from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
+from kesbrdf.cli._protocol import add_protocol_arguments, orientations
 
 HELP = "Measure a reference BRDF in the paper's (or a denser) protocol; writes a measurement CSV."
 
 
 def add_arguments(p):
     p.add_argument("-o", "--output", required=True, help="measurement CSV to write")
-    p.add_argument("--reference", default="satin-ward", help=f"reference BRDF: {', '.join(REFERENCES)}")
+    p.add_argument("--reference", default="satin-ward",
+                   help=f"reference BRDF: {', '.join(REFERENCES)}; or the path of any RGL .bsdf or MERL .binary "
+                   "file. The rgl-felt-* names look for their files in $KESBRDF_RGL_DIR, then in the source "
+                   "tree's tests/data/rgl (white felt only); see docs/formats.md")
     p.add_argument("--params", help="JSON object of reference parameters, e.g. '{\"alpha_x\": 0.1}'")
-    p.add_argument("--protocol", default="paper", choices=("paper", "dense"))
-    p.add_argument("--step-deg", type=float, default=None, help="angle step (paper: 3, dense: 6)")
-    p.add_argument("--orientations-deg", default=",".join(f"{v:g}" for v in PAPER_ORIENTATIONS_DEG),
-                   help="comma-separated ψ values (default: the paper's 0,45,90,135)")
+    add_protocol_arguments(p)
     p.add_argument("--noise", type=float, default=0.0, help="relative noise (std / value)")
     p.add_argument("--noise-floor", type=float, default=0.0, help="absolute noise std, 1/sr")
     p.add_argument("--seed", type=int, default=0)
@@ -40,10 +40,7 @@ def run(args) -> int:
         raise KesbrdfError(f"--seed: expected an integer >= 0, got {args.seed}")
     if args.vignetting and not args.images:
         raise KesbrdfError("--vignetting: applies to camera frames only; add --images DIR")
-    try:
-        orientations = tuple(float(x) for x in args.orientations_deg.split(","))
-    except ValueError:
-        raise KesbrdfError(f"--orientations-deg: expected comma-separated degrees, got {args.orientations_deg!r}") from None
+    orientations_deg = orientations(args.orientations_deg)
     reference = make_reference(args.reference, args.params)
     if args.images:
         from kesbrdf.acquisition.camera import simulate_images
@@ -54,7 +51,7 @@ def run(args) -> int:
             args.images,
             protocol=args.protocol,
             step_deg=args.step_deg,
-            orientations_deg=orientations,
+            orientations_deg=orientations_deg,
             seed=args.seed,
             sensor=Sensor(bit_depth=args.bit_depth, vignetting=args.vignetting),
             file_format="tiff" if args.bit_depth == 16 else "png",
@@ -68,7 +65,7 @@ def run(args) -> int:
         noise=args.noise,
         noise_floor=args.noise_floor,
         rng=args.seed,
-        orientations_deg=orientations,
+        orientations_deg=orientations_deg,
         sample=f"simulated {args.reference}",
     )
     write_measurement(args.output, m)

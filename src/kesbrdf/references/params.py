@@ -61,6 +61,9 @@ PARAMETERS: dict[str, dict[str, tuple]] = {
     **{f"sadeghi-{p}": _SADEGHI for p in ("linen", "silk-crepe", "satin-back", "silk-shot", "velvet")},
     **{f"rgl-felt-{c}": {"parameterised_by": ("choice", ("light", "viewer"), None, False)}
        for c in ("white", "pink", "purple")},
+    # references given as a file path (kesbrdf.references.registry.is_reference_path)
+    "rgl-file": {"parameterised_by": ("choice", ("light", "viewer"), None, False)},
+    "merl-file": {},
 }
 
 
@@ -129,9 +132,8 @@ def parse_params(reference: str, text: str | None, flag: str = "--params") -> di
         raise KesbrdfError(f"{flag}: expected a JSON object of parameter names and values, got {type(doc).__name__}")
     for name, value in doc.items():
         if name not in spec:
-            raise KesbrdfError(
-                f"{flag}: unknown parameter {name!r} of reference {reference}; expected some of {', '.join(spec)}"
-            )
+            expected = f"expected some of {', '.join(spec)}" if spec else "it takes none"
+            raise KesbrdfError(f"{flag}: unknown parameter {name!r} of reference {reference}; {expected}")
         _check(reference, name, value, spec[name], flag)
     if reference in ("ward", "satin-ward", "isotropic", "ashikhmin-shirley"):
         per_channel = [k for k, s in spec.items() if s[0] == "channels" and isinstance(doc.get(k), list)]

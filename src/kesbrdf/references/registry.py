@@ -16,6 +16,10 @@ Names
 ``rgl-felt-<colour>``
     RGL-EPFL measured felts read through Mitsuba's ``measured`` plugin; the white felt
     ships with the tests (CC0), the others are found through ``$KESBRDF_RGL_DIR``.
+A path
+    Any RGL tensor file (``.bsdf``) or MERL ``.binary``
+    (:func:`kesbrdf.io.sources.reference_from_file`, numpy readers, recognised by
+    content).  ``--params`` as for ``rgl-felt-*`` (``parameterised_by``) or none (MERL).
 """
 
 from __future__ import annotations
@@ -27,7 +31,8 @@ from pathlib import Path
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.references.params import parse_params
 
-__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "RGL_FILES", "RGL_DIRS", "make_reference", "rgl_path"]
+__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "RGL_FILES", "RGL_DIRS", "make_reference", "rgl_path",
+           "is_reference_path"]
 
 _SADEGHI_PRESETS = ("linen", "silk_crepe", "satin", "satin_back", "silk_shot", "velvet")
 
@@ -62,8 +67,36 @@ def rgl_path(name: str) -> Path:
             return p
     raise KesbrdfError(
         f"reference {name!r}: expected {RGL_FILES[name]} in {', '.join(str(d) for d in RGL_DIRS)} "
-        "(set KESBRDF_RGL_DIR), found none"
+        "(set KESBRDF_RGL_DIR to the folder holding it, or give the file's path as the reference), found none"
     )
+
+
+#: Endings that make a reference name a file path even when the file is missing (so the
+#: error is "no such file", not "unknown reference").
+FILE_ENDINGS = (".bsdf", ".binary")
+
+
+def is_reference_path(name) -> bool:
+    """True when ``name`` is meant as a file (not a built-in name): a path separator, a
+    table ending (:data:`FILE_ENDINGS`), or an existing file."""
+    text = str(name)
+    if text in REFERENCES:
+        return False
+    return os.sep in text or "/" in text or text.lower().endswith(FILE_ENDINGS) or Path(text).is_file()
+
+
+def _reference_from_path(path: str, params, flag: str):
+    from kesbrdf.io.sources import detect, reference_from_file
+
+    kind = detect(path)  # FileNotFoundError / one-line FormatError
+    spec_name = {"rgl-bsdf": "rgl-file", "merl-binary": "merl-file"}.get(kind)
+    if spec_name is None:
+        raise KesbrdfError(
+            f"reference {path}: expected a built-in name ({', '.join(REFERENCES)}) or an RGL .bsdf / "
+            f"MERL .binary file, got a {kind} file (fit or convert reads measurements)"
+        )
+    extra = parse_params(spec_name, params, flag)
+    return reference_from_file(path, parameterised_by=extra.get("parameterised_by", "viewer"))
 
 
 def make_reference(name: str, params=None, flag: str = "--params"):
@@ -72,16 +105,19 @@ def make_reference(name: str, params=None, flag: str = "--params"):
     Parameters
     ----------
     name : str
-        One of :data:`REFERENCES`; anything else is a one-line error listing them.
+        One of :data:`REFERENCES`, or the path of an RGL ``.bsdf`` / MERL ``.binary`` file
+        (:func:`is_reference_path`); anything else is a one-line error listing the names.
     params : dict, JSON text or None
         Overrides of the defaults, checked against the reference's parameters
         (:mod:`kesbrdf.references.params`).
     flag : str
         The option the parameters came from, for error messages.
     """
-    validate_choice("reference", name, REFERENCES)
     if isinstance(params, dict):
         params = json.dumps(params) if params else None
+    if is_reference_path(name):
+        return _reference_from_path(str(name), params, flag)
+    validate_choice("reference", name, REFERENCES)
     extra = parse_params(name, params, flag)
     try:
         return _build(name, extra)
