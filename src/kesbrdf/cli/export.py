@@ -62,6 +62,15 @@ def _is_number(v) -> bool:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 
+def _numbers(err: dict) -> list[tuple[str, object]]:
+    """The numbers of one error record, then the parameters at a bound (``at bound: ...``)."""
+    numbers = [(k, v) for k, v in err.items() if _is_number(v)]
+    bounds = err.get("at_bounds")
+    if isinstance(bounds, list) and bounds:
+        numbers.append(("at bound:", ", ".join(map(str, bounds))))
+    return numbers
+
+
 def _records(label: str, value: dict) -> list[tuple[str, list]]:
     """(label, [(name, number), ...]) of one nested agreement entry.
 
@@ -71,15 +80,11 @@ def _records(label: str, value: dict) -> list[tuple[str, list]]:
     """
     if isinstance(value.get("error"), dict):
         label = f"{label} {value['material']}" if isinstance(value.get("material"), str) else label
-        numbers = [(k, v) for k, v in value["error"].items() if _is_number(v)]
-        bounds = value["error"].get("at_bounds")
-        if isinstance(bounds, list) and bounds:
-            numbers.append(("at bound:", ", ".join(map(str, bounds))))
-        return [(label, numbers)]
+        return [(label, _numbers(value["error"]))]
     if value and all(isinstance(v, dict) for v in value.values()):
         return [r for sub, v in value.items()
                 for r in _records(label if isinstance(v.get("material"), str) else f"{label} {sub}", v)]
-    return [(label, [(k, v) for k, v in value.items() if _is_number(v)])]
+    return [(label, _numbers(value))]
 
 
 def agreement_line(agreement: dict) -> str:
@@ -89,13 +94,13 @@ def agreement_line(agreement: dict) -> str:
     parameters, error) prints only its error numbers, e.g. ``fit gltf_pbr: nrmse 0.528,
     nrmse_theta_le_70 0.46``, one record per variant when the export holds several
     (MaterialX, USD), and the parameters that ended at a bound of their physical range
-    (``at bound: ior max``).  The parameters are in the exported file itself; ``fit_error``,
-    the short copy of ``fit``'s errors that the analytic formats also report, is left
-    out when ``fit`` is there.
+    (``at bound: ior max``).  The parameters are in the exported file itself: when a short
+    ``fit_error`` record (every variant's errors) is there, the full ``fit`` record is
+    left out.
     """
     parts = []
     for key, value in agreement.items():
-        if key == "fit_error" and isinstance(agreement.get("fit"), dict):
+        if key == "fit" and isinstance(agreement.get("fit_error"), dict):
             continue
         if not isinstance(value, dict):
             parts.append(f"{key}={_number(value)}")
