@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = "Export a model for other tools (Mitsuba/pbrt .bsdf, Mitsuba scene, ...); see docs/exports.md."
 
@@ -78,6 +78,7 @@ def run(args) -> int:
         return 0
     if not args.model or not args.fmt or not args.output:
         raise ExportError("export: expected MODEL, --format FMT and -o OUT (or --list)")
+    check_output(args.output)  # the folder rule; the format's endings are checked by export()
     result = export(args.model, args.fmt, args.output, **parse_options(args.option))
     for p in result.paths:
         size = p.stat().st_size if p.is_file() else 0

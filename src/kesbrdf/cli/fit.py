@@ -8,7 +8,7 @@ kind is an error.
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = "Fit a model to a measurement CSV (kind chosen from the data); writes a model file (.kes.json)."
 
@@ -68,6 +68,7 @@ def run(args) -> int:
     import kesbrdf
     from kesbrdf.io.measurement_csv import read_measurement
 
+    check_output(args.output)
     options = _options(args)
     m = read_measurement(args.measurement)
     for note in m.notes:

@@ -9,7 +9,10 @@ The kind's ``from_payload`` checks its own arrays (shapes, grids, values).
 No pickle anywhere: ``load_model(save_model(m))`` rebuilds an identical model from
 plain JSON and raw little-endian bytes.  Every malformed file gives a one-line
 :class:`~kesbrdf.errors.ModelError` naming it: types and shapes are checked before
-any allocation, nesting is bounded, non-finite tables are refused.
+any allocation, nesting is bounded, and every number — JSON field or array element —
+must be finite and of magnitude at most :data:`~kesbrdf.io.text.MAX_ABS_NUMBER` (the
+bound of the CSV readers), so no product in evaluation or export overflows.  NaN is
+allowed only in arrays whose kind gives it a meaning (``q_nodes``: unmeasured).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import numpy as np
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
+from kesbrdf.io.text import MAX_ABS_NUMBER
 from kesbrdf.kinds import kind_class
 
 __all__ = [
@@ -42,14 +46,18 @@ __all__ = [
 
 FORMAT = "kesbrdf-model"
 FORMAT_VERSION = 1
-#: Largest array a model file may hold (elements): 2**27 doubles = 1 GiB.
-MAX_ARRAY_ELEMENTS = 1 << 27
-#: Largest model file read (bytes).
-MAX_FILE_BYTES = 2 << 30
+#: Most array elements a model file may hold, in one array and in all together: 2**24
+#: doubles = 128 MiB.  The largest table kesbrdf fits is a kes-halfdiff at the finest
+#: 1° θ step, 360 × 91 × 91 × 3 channels ≈ 8.9 million (docs/formats.md).
+MAX_ARRAY_ELEMENTS = 1 << 24
+#: Largest model file read (bytes): the base64 text of MAX_ARRAY_ELEMENTS doubles
+#: (171 MiB) plus room for the JSON fields.  Loading costs about 3× the file size.
+MAX_FILE_BYTES = 192 << 20
 #: Deepest JSON nesting accepted (the writer's deepest is ~6).
 MAX_DEPTH = 64
 #: Array dtypes accepted on reading (the writer writes ``<f8``).
 DTYPES = ("<f8", "<f4")
+_BOUND = f"{MAX_ABS_NUMBER:g}".replace("e+", "e")  # "1e100"
 _SHARED = ("channels", "input", "parameters", "diagnostics")
 
 
@@ -95,20 +103,45 @@ def decode_array(obj, name: str = "array", source=None) -> np.ndarray:
         raise ModelError(f"{prefix}expected base64 data, got invalid characters or padding") from None
     if len(raw) != n_bytes:
         raise ModelError(f"{prefix}expected {n_bytes} bytes for shape {shape}, got {len(raw)}")
-    return np.frombuffer(raw, dtype=dtype).reshape(shape).astype(float)
+    a = np.frombuffer(raw, dtype=dtype).reshape(shape).astype(float)
+    del raw
+    with np.errstate(invalid="ignore"):
+        bad = np.abs(a) > MAX_ABS_NUMBER  # ±inf included; NaN is the kind's to judge
+    if bad.any():
+        where_bad = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ModelError(f"{prefix}expected finite values of magnitude at most {_BOUND}, got "
+                         f"{float(a[where_bad])!r} at index {list(where_bad)} ({int(bad.sum())} such value(s))")
+    return a
 
 
-def _check_depth(doc, source) -> None:
-    """Iterative nesting check (no recursion on hostile input)."""
-    stack = [(doc, 1)]
+def _field_name(path: tuple) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")[:120] or "document"
+
+
+def _check_tree(doc, source) -> None:
+    """Nesting depth and the range of every JSON number, iteratively (no recursion on hostile input).
+
+    The first bad number gives a one-line ModelError naming its field (``parameters.body``,
+    ``prior.theta.alpha``, ``support.psi_deg[2]``); array data (base64 text) is checked
+    by :func:`decode_array`.
+    """
+    stack = [(doc, ())]
     while stack:
-        node, depth = stack.pop()
-        if depth > MAX_DEPTH:
+        node, path = stack.pop()
+        if len(path) >= MAX_DEPTH:
             raise ModelError(f"{where(source)}expected JSON nested at most {MAX_DEPTH} deep, got deeper")
         if isinstance(node, dict):
-            stack.extend((v, depth + 1) for v in node.values())
+            stack.extend((v, path + (str(k),)) for k, v in node.items())
         elif isinstance(node, list):
-            stack.extend((v, depth + 1) for v in node)
+            stack.extend((v, path + (i,)) for i, v in enumerate(node))
+        elif isinstance(node, (int, float)) and not isinstance(node, bool):
+            if not (math.isfinite(node) and abs(node) <= MAX_ABS_NUMBER):
+                if isinstance(node, int):
+                    shown = f"an integer of {len(str(abs(node)))} digits"
+                else:  # JSON has no inf: a non-finite float is a number text that overflowed
+                    shown = repr(node) if math.isfinite(node) else "a number that overflows a double"
+                raise ModelError(f"{where(source)}{_field_name(path)}: expected a finite number of magnitude "
+                                 f"at most {_BOUND}, got {shown}")
 
 
 def model_to_dict(model) -> dict:
@@ -158,17 +191,10 @@ def _no_constant(name):
     raise ValueError(f"{name} is not valid JSON")
 
 
-def _finite_float(text):
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"number {text[:30]} overflows a double")
-    return value
-
-
 def model_from_text(text: str, source=None):
     """Parse and check a model document given as text."""
     try:
-        doc = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
+        doc = json.loads(text, parse_constant=_no_constant)  # numbers: range-checked by field
     except json.JSONDecodeError as exc:
         raise ModelError(
             f"{where(source, exc.lineno)}expected a kesbrdf model file (JSON), got invalid JSON: {exc.msg}"
@@ -185,7 +211,7 @@ def model_from_dict(doc, source=None):
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise ModelError(f"{where(source)}expected format {FORMAT!r}, got {str(got)[:60]!r}")
-    _check_depth(doc, source)
+    _check_tree(doc, source)
     version = doc.get("format_version")
     if not _is_int(version) or version != FORMAT_VERSION:
         raise ModelError(f"{where(source)}expected model format version {FORMAT_VERSION}, got {repr(version)[:40]}")

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 
+from kesbrdf._atomic import write_bytes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KesbrdfError, ModelError, where, validate_choice
 
@@ -229,7 +230,7 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
     safe = _safe_upload_name(name)
     with tempfile.TemporaryDirectory(prefix="kesbrdf-view-") as tmp:
         csv_path = Path(tmp) / safe
-        csv_path.write_bytes(data)
+        write_bytes(csv_path, data)
         prefix = str(Path(tmp)) + os.sep
         try:
             measurement = read_measurement(csv_path)
