@@ -116,6 +116,13 @@ def _about(exc: OSError, *paths: Path) -> bool:
     return not given or any(os.fspath(f) in names for f in given)
 
 
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders a failed write created (deepest first), if still empty."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
 def _tmp_name(path: Path) -> str:
     """The target's name as it appears in its temporaries (cut to fit the name limit)."""
     name = path.name
@@ -198,9 +205,14 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
     ('hi', ['x.txt'])
     """
     path = Path(path)
-    if len(os.fsencode(path.name)) > _name_max(path.parent):  # before any content is written
-        raise output_error(OSError(errno.ENAMETOOLONG, os.strerror(errno.ENAMETOOLONG), str(path)), path)
-    if path.is_dir():  # name the target, not the temporary file the rename would fail on
+    try:
+        if len(os.fsencode(path.name)) > _name_max(path.parent):  # before any content is written
+            raise OSError(errno.ENAMETOOLONG, os.strerror(errno.ENAMETOOLONG), str(path))
+        is_dir = path.is_dir()
+        created = [p for p in (path.parent, *path.parent.parents) if not p.exists()]  # deepest first
+    except OSError as exc:  # a name or path too long, a file in the way, ...
+        raise output_error(exc, path) from exc
+    if is_dir:  # name the target, not the temporary file the rename would fail on
         raise IsADirectoryError(errno.EISDIR, "expected a file to write, got a directory", str(path))
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -208,8 +220,10 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
         suffix = ".part" + (path.suffix if keep_suffix else "")
         fd, tmp = tempfile.mkstemp(prefix=f".{_tmp_name(path)}.{os.getpid()}-", suffix=suffix, dir=path.parent)
     except OSError as exc:
+        _remove_empty(created)
         raise output_error(exc, path) from exc
     tmp_path = Path(tmp)
+    done = False
     try:
         os.close(fd)
         yield tmp_path
@@ -218,6 +232,7 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
         os.umask(umask)
         os.chmod(tmp_path, 0o666 & ~umask)
         os.replace(tmp_path, path)
+        done = True
     except OSError as exc:
         if not _about(exc, tmp_path, path):  # e.g. an input the block reads is missing
             raise
@@ -225,6 +240,8 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
     finally:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
+        if not done:
+            _remove_empty(created)
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:
