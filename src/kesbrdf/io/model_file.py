@@ -179,12 +179,18 @@ def load_model(path):
         size = 0
     if size > MAX_FILE_BYTES:
         raise ModelError(f"{where(path)}expected a model file of at most {MAX_FILE_BYTES} bytes, got {size}")
-    raw = path.read_bytes()
+    with open(path, "rb") as fh:  # bounded read: a file that grows, a FIFO, /dev/zero
+        raw = fh.read(MAX_FILE_BYTES + 1)
+    if len(raw) > MAX_FILE_BYTES:
+        raise ModelError(f"{where(path)}expected a model file of at most {MAX_FILE_BYTES} bytes, got more")
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ModelError(f"{where(path)}expected a kesbrdf model file (JSON), got binary data") from None
-    return model_from_text(text, source=path)
+    del raw  # peak memory: the text, the parsed document and one decoded array at a time
+    doc = _parse(text, path)
+    del text
+    return model_from_dict(doc, source=path)
 
 
 def _no_constant(name):
@@ -193,6 +199,11 @@ def _no_constant(name):
 
 def model_from_text(text: str, source=None):
     """Parse and check a model document given as text."""
+    return model_from_dict(_parse(text, source), source=source)
+
+
+def _parse(text: str, source=None):
+    """The JSON document of ``text``; a one-line ModelError for anything that is not JSON."""
     try:
         doc = json.loads(text, parse_constant=_no_constant)  # numbers: range-checked by field
     except json.JSONDecodeError as exc:
@@ -203,7 +214,7 @@ def model_from_text(text: str, source=None):
         raise ModelError(f"{where(source)}expected JSON nested at most {MAX_DEPTH} deep, got deeper") from None
     except ValueError as exc:  # NaN/Infinity constants, huge integers
         raise ModelError(f"{where(source)}expected a kesbrdf model file (JSON), got {exc}") from None
-    return model_from_dict(doc, source=source)
+    return doc
 
 
 def model_from_dict(doc, source=None):
