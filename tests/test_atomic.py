@@ -155,3 +155,48 @@ def test_the_file_is_fsynced_before_the_rename_and_its_folder_after(tmp_path, mo
     if os.path.exists("/proc/self/fd"):  # Linux: check what was synced
         assert events[0][1].startswith(str(tmp_path / ".model.kes.json.")) and events[0][1].endswith(".part")
         assert events[2][1] == str(tmp_path)
+
+
+# -- write errors (issue 16): one OutputError naming the target and the cause --------------
+@pytest.mark.parametrize("code,words", [
+    (28, "disk full"), (30, "read-only file system"), (13, "permission denied"), (5, "input/output error"),
+])
+def test_a_failing_write_is_one_output_error_and_leaves_nothing(tmp_path, monkeypatch, code, words):
+    from faults import failing_writes, listing
+
+    from kesbrdf.errors import OutputError
+
+    target = tmp_path / "new" / "m.kes.json"
+    failing_writes(monkeypatch, tmp_path, code, at="create" if code in (30, 13) else "write")
+    with pytest.raises(OutputError) as info:
+        write_text(target, "x" * 10_000)
+    monkeypatch.undo()
+    assert str(info.value).startswith(f"cannot write {target}: ") and words in str(info.value)
+    assert info.value.errno == code and "\n" not in str(info.value)
+    assert listing(tmp_path) == []  # no temporary, no half file, not even the folder made for it
+
+
+def test_an_input_error_inside_the_block_is_not_called_a_write_error(tmp_path):
+    """Only errors about the target or its temporary are translated: a missing input stays itself."""
+    with pytest.raises(FileNotFoundError):
+        with atomic_path(tmp_path / "out.png") as tmp:
+            (tmp_path / "missing-frame.png").read_bytes()
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_name_near_the_limit_gets_a_shortened_temporary(tmp_path):
+    """240 bytes is a legal name; the temporary's would be ~265 without shortening."""
+    target = tmp_path / ("n" * 235 + ".json")
+    with atomic_path(target) as tmp:
+        assert len(tmp.name.encode()) <= 255
+        tmp.write_text("{}")
+    assert target.read_text() == "{}" and _hidden(tmp_path) == []
+
+
+def test_a_name_past_the_limit_fails_before_writing(tmp_path):
+    from kesbrdf.errors import OutputError
+
+    with pytest.raises(OutputError, match="file name too long \\(305 bytes"):
+        with atomic_path(tmp_path / ("a" * 300 + ".json")):
+            raise AssertionError("the block must not run")
+    assert list(tmp_path.iterdir()) == []

@@ -14,6 +14,11 @@ beside the target.  They are removed
   killed by SIGKILL or a power cut cannot clean up, so the next writer removes the
   temporaries whose writing process is gone.  Temporaries of a process that is still
   running (a concurrent writer) are left alone.
+
+A write that fails in the system (disk full, read-only file system, name too long, a
+file where a folder must be, permission denied, ...) raises
+:class:`~kesbrdf.errors.OutputError`: one line naming the target and the cause in
+words (:func:`output_error`).  Other errors raised inside the block pass unchanged.
 """
 
 from __future__ import annotations
@@ -27,12 +32,107 @@ import time
 from pathlib import Path
 from typing import Iterator
 
+from kesbrdf.errors import OutputError
+
 __all__ = ["atomic_path", "write_text", "write_bytes", "remove_stale", "fsync_file", "fsync_dir",
-           "STALE_LEGACY_SECONDS"]
+           "output_error", "describe", "STALE_LEGACY_SECONDS"]
 
 #: Temporaries in the older naming (no process id: ``.<name>.<random>.part`` and the
 #: animation encoder's ``.<stem>.partial<ext>``) are removed once they are this old.
 STALE_LEGACY_SECONDS = 60.0
+
+#: Longest file name (bytes) assumed when the file system does not say (POSIX NAME_MAX).
+NAME_MAX = 255
+#: Bytes a temporary's name adds to the target's: ``.`` ``.PID-RANDOM.part`` and a suffix.
+_TMP_EXTRA = 48
+
+#: The cause of a failed write, in words, by errno (any other code: the system's text).
+_CAUSES = {
+    errno.ENOSPC: "disk full (no space left on device)",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EFBIG: "file too large for the file system",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied (operation not permitted)",
+    errno.EIO: "input/output error (failing disk or lost network share)",
+    errno.EMFILE: "too many open files",
+    errno.ENFILE: "too many open files in the system",
+    errno.ELOOP: "too many levels of symbolic links",
+    errno.EBUSY: "file or device busy",
+    errno.ETXTBSY: "file busy",
+    errno.EISDIR: "expected a file, got an existing folder",
+    errno.EXDEV: "temporary and target on different file systems",
+}
+
+
+def _name_max(folder: Path) -> int:
+    """Longest file name (bytes) in ``folder``'s nearest existing ancestor's file system."""
+    for parent in (folder, *folder.parents):
+        try:
+            return int(os.pathconf(parent, "PC_NAME_MAX"))
+        except (OSError, ValueError):
+            continue
+    return NAME_MAX
+
+
+def describe(exc: OSError, path: str | os.PathLike) -> str:
+    """``exc``'s cause in words, naming the part of ``path`` at fault where it can."""
+    path = Path(path)
+    code = exc.errno
+    if code == errno.ENAMETOOLONG:
+        limit = _name_max(path.parent)
+        longest = max(path.parts, key=lambda p: len(os.fsencode(p)))
+        n = len(os.fsencode(longest))
+        if n > limit:
+            return f"file name too long ({n} bytes in {longest[:24]}..., at most {limit} on this file system)"
+        return f"path too long ({len(os.fsencode(str(path)))} bytes)"
+    if code in (errno.ENOTDIR, errno.EEXIST):
+        for parent in reversed(path.parents):
+            if parent.exists() and not parent.is_dir():
+                return f"{parent} is a file, not a folder"
+    if code == errno.ENOENT:
+        for parent in reversed(path.parents):
+            if not parent.exists():
+                return f"folder {parent} does not exist"
+    if code in _CAUSES:
+        return _CAUSES[code]
+    return (exc.strerror or str(exc) or type(exc).__name__).lower()
+
+
+def output_error(exc: OSError, path: str | os.PathLike) -> OutputError:
+    """The one-line :class:`OutputError` for ``exc``, raised while writing ``path``.
+
+    >>> import errno
+    >>> str(output_error(OSError(errno.ENOSPC, "No space left on device"), "out/m.kes.json"))
+    'cannot write out/m.kes.json: disk full (no space left on device)'
+    >>> str(output_error(OSError(errno.EROFS, "Read-only file system"), "/mnt/m.csv"))
+    'cannot write /mnt/m.csv: read-only file system'
+    """
+    path = Path(path)
+    return OutputError(f"cannot write {path}: {describe(exc, path)}", exc.errno)
+
+
+def _about(exc: OSError, *paths: Path) -> bool:
+    """Whether ``exc`` comes from writing one of ``paths`` (or names no file: a failed write)."""
+    names = {os.fspath(p) for p in paths}
+    given = [f for f in (exc.filename, exc.filename2) if f is not None]
+    return not given or any(os.fspath(f) in names for f in given)
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders a failed write created (deepest first), if still empty."""
+    for folder in folders:
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
+def _tmp_name(path: Path) -> str:
+    """The target's name as it appears in its temporaries (cut to fit the name limit)."""
+    name = path.name
+    limit = NAME_MAX - _TMP_EXTRA
+    while len(os.fsencode(name)) > limit:
+        name = name[:-1]
+    return name
 
 
 def _pid_alive(pid: int) -> bool:
@@ -61,7 +161,7 @@ def remove_stale(path: str | os.PathLike) -> list[Path]:
     """
     path = Path(path)
     folder = path.parent
-    name = re.escape(path.name)
+    name = re.escape(_tmp_name(path))
     stem, ext = re.escape(path.stem), re.escape(path.suffix)
     current = re.compile(rf"^\.{name}\.(\d+)-[A-Za-z0-9_]+\.part(\.[^./]*)?$")
     legacy = re.compile(rf"^(\.{name}\.[A-Za-z0-9_]+\.part|\.{stem}\.partial{ext})$")
@@ -136,13 +236,25 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
     ('hi', ['x.txt'])
     """
     path = Path(path)
-    if path.is_dir():  # name the target, not the temporary file the rename would fail on
+    try:
+        if len(os.fsencode(path.name)) > _name_max(path.parent):  # before any content is written
+            raise OSError(errno.ENAMETOOLONG, os.strerror(errno.ENAMETOOLONG), str(path))
+        is_dir = path.is_dir()
+        created = [p for p in (path.parent, *path.parent.parents) if not p.exists()]  # deepest first
+    except OSError as exc:  # a name or path too long, a file in the way, ...
+        raise output_error(exc, path) from exc
+    if is_dir:  # name the target, not the temporary file the rename would fail on
         raise IsADirectoryError(errno.EISDIR, "expected a file to write, got a directory", str(path))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale(path)
-    suffix = ".part" + (path.suffix if keep_suffix else "")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.{os.getpid()}-", suffix=suffix, dir=path.parent)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        remove_stale(path)
+        suffix = ".part" + (path.suffix if keep_suffix else "")
+        fd, tmp = tempfile.mkstemp(prefix=f".{_tmp_name(path)}.{os.getpid()}-", suffix=suffix, dir=path.parent)
+    except OSError as exc:
+        _remove_empty(created)
+        raise output_error(exc, path) from exc
     tmp_path = Path(tmp)
+    done = False
     try:
         os.close(fd)
         yield tmp_path
@@ -153,9 +265,16 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
         fsync_file(tmp_path)  # the bytes are on disk before the name points at them
         os.replace(tmp_path, path)
         fsync_dir(path.parent)  # and the rename itself survives a power cut
+        done = True
+    except OSError as exc:
+        if not _about(exc, tmp_path, path):  # e.g. an input the block reads is missing
+            raise
+        raise output_error(exc, path) from exc
     finally:
-        with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(OSError):
             tmp_path.unlink()
+        if not done:
+            _remove_empty(created)
 
 
 def write_text(path: str | os.PathLike, text: str) -> Path:

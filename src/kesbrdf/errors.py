@@ -17,6 +17,7 @@ __all__ = [
     "KESError",
     "ModelError",
     "ExportError",
+    "OutputError",
     "where",
     "validate_choice",
 ]
@@ -106,3 +107,15 @@ def validate_choice(
     raise error(f"{where(source, line)}{name}: expected one of {listed}, got {shown}")
 class ExportError(KesbrdfError):
     """An export cannot be written as asked (format, output path, options, model kind)."""
+
+
+class OutputError(KesbrdfError):
+    """An output cannot be written: disk full, read-only file system, name too long, ...
+
+    Raised by :mod:`kesbrdf._atomic` from the :class:`OSError` of a failed write; the
+    message names the target and the cause in words.  ``errno`` keeps the system's code.
+    """
+
+    def __init__(self, message: str, errno: int | None = None):
+        super().__init__(message)
+        self.errno = errno

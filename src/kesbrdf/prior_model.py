@@ -148,6 +148,12 @@ class FibrePriorModel(ReflectanceModel):
                 residual = SimpleNamespace(phi_grid=phi, gamma_grid=gamma, table=table,
                                            line_sum=float(fields["residual"]["line_sum"]),
                                            gamma_max=float(fields["residual"]["gamma_max"]))
+            if residual is not None:
+                for name in ("table", "phi_grid", "theta_h_grid", "theta_d_grid", "gamma_grid"):
+                    a = getattr(residual, name, None)
+                    if a is not None and not np.all(np.isfinite(a)):
+                        raise ModelError(f"{source or 'model'}: residual_{name}: expected finite values, got "
+                                         f"{int(np.count_nonzero(~np.isfinite(a)))} NaN or inf")
             kes, support = None, None
             if fields.get("kes_candidate") is not None:
                 from kesbrdf.io.model_file import model_from_dict

@@ -307,3 +307,71 @@ def test_any_input_loads_or_raises_typed_error(work, data, name):
     m = _run("sources", read)
     if m is not None:
         assert len(m) > 0 and np.all(np.isfinite(m.values))
+
+
+# -- model files (kesbrdf.io.model_file) ------------------------------------------------
+def _model_seeds() -> dict:
+    """Small valid model files of the table kinds (written with the writer's indent)."""
+    from kesbrdf.gonio import measure
+    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.io.model_file import model_to_dict
+    from kesbrdf.model import fit
+    from kesbrdf.references.ward import AnisotropicWard
+
+    ref = AnisotropicWard(0.15, 0.3, rho_d=0.1, rho_s=0.1)
+    models = {"kes": fit(measure(ref), n_phi=8, gamma_step=np.radians(12.0)),
+              "kes-halfdiff": fit_halfdiff(measure(ref, protocol="dense", step_deg=18), n_phi=8)}
+    return {k: (json.dumps(model_to_dict(m), indent=1) + "\n").encode() for k, m in models.items()}
+
+
+MODEL_SEEDS = _model_seeds()
+#: Array values that broke (or could break) evaluation and export: overflow on the
+#: way (1e308 / cos θ), NaN, inf, values past float32 (1e50), past the reader's bound
+#: (1e101), negative, subnormal.
+EXTREME_VALUES = (1e308, -1e308, float("nan"), float("inf"), -float("inf"), 1e101, 1e100, 1e50, 3.5e38,
+                  -1.0, 5e-324, 0.0)
+
+
+@st.composite
+def extreme_array_value(draw):
+    """A model file with one element of one array replaced by an extreme value."""
+    import base64
+
+    doc = json.loads(MODEL_SEEDS[draw(st.sampled_from(sorted(MODEL_SEEDS)))])
+    entry = doc["arrays"][draw(st.sampled_from(sorted(doc["arrays"])))]
+    a = np.frombuffer(base64.b64decode(entry["data"]), "<f8").copy()
+    if a.size:
+        a[draw(st.integers(0, a.size - 1))] = draw(st.sampled_from(EXTREME_VALUES))
+    entry["data"] = base64.b64encode(a.tobytes()).decode("ascii")
+    return (json.dumps(doc, indent=1) + "\n").encode()
+
+
+PAIRS_WI = np.array([[0.3, 0.1, 0.95], [-0.7, 0.2, 0.05], [0.0, 0.0, 1.0], [0.999, 0.0, 1e-3]])
+PAIRS_WR = np.array([[-0.2, 0.2, 0.96], [0.6, -0.1, 0.08], [0.0, 0.0, 1.0], [-0.999, 0.0, 1e-3]])
+
+
+@settings(max_examples=examples(TEXT_EXAMPLES // 4))
+@given(data=st.one_of(mutated(list(MODEL_SEEDS.values())), extreme_array_value()))
+def test_model_file_loads_or_raises_typed_error(work, data):
+    """A model file loads or gives one line; what loads evaluates finite and >= 0, and
+    every export either accepts it or refuses it in one line (never a crash)."""
+    from kesbrdf.io.model_file import load_model
+
+    path = work / "m.kes.json"
+    path.write_bytes(data)
+    model = _run("model_file", lambda: load_model(path))
+    if model is not None:
+        wi = PAIRS_WI / np.linalg.norm(PAIRS_WI, axis=1, keepdims=True)
+        wr = PAIRS_WR / np.linalg.norm(PAIRS_WR, axis=1, keepdims=True)
+        for mapping in model.mappings:
+            f = model.evaluate(wi, wr, mapping)
+            assert np.all(np.isfinite(f)) and np.all(f >= 0), (model.kind, mapping, f)
+        from kesbrdf.errors import ExportError
+        from kesbrdf.export._framework import VALUE_MAX, check_values
+
+        try:
+            check_values(model, "rgl-bsdf")
+        except ExportError as exc:
+            assert "\n" not in str(exc)
+        else:
+            assert np.all(f <= VALUE_MAX)

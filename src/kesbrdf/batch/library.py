@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kesbrdf._atomic import write_text
 from kesbrdf.batch.catalog import Fabric, write_catalog
 from kesbrdf.batch.steps import make_fabric_reference
 
@@ -96,7 +97,7 @@ def simulate_library(n: int, out, seed: int = 0, broken: int = 2, images_every: 
             cells = lines[row].split(",")
             cells[-1] = "n/a"
             lines[row] = ",".join(cells)
-            (out / f"{fid}.csv").write_text("\n".join(lines) + "\n")
+            write_text(out / f"{fid}.csv", "\n".join(lines) + "\n")
             inp = f"{fid}.csv"
         elif what == "missing-orientations":
             keep = np.flatnonzero(np.degrees(base.psi) < 30)

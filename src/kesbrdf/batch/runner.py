@@ -34,6 +34,7 @@ import time
 from pathlib import Path
 
 from kesbrdf.batch import isolation
+from kesbrdf._atomic import write_text
 from kesbrdf.batch import manifest as mf
 from kesbrdf.batch.catalog import DEFAULT_OPTIONS, Fabric
 from kesbrdf.batch.steps import DEPENDS, STEP_FUNCTIONS, closure, input_files, step_params
@@ -96,7 +97,7 @@ def _test_hooks(step: str, fabric: str) -> None:
         record = Path(fail["record"])
         record.mkdir(parents=True, exist_ok=True)
         n = len(list(record.glob(f"{fabric}.{step}.*")))
-        (record / f"{fabric}.{step}.{n}.{os.getpid()}").write_text("attempt\n")
+        write_text(record / f"{fabric}.{step}.{n}.{os.getpid()}", "attempt\n")
         if n == 0:
             raise RuntimeError(f"injected transient failure in {fabric}/{step} (test hook)")
 
@@ -248,7 +249,7 @@ def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record
                            for p in sorted(scratch.rglob("*")) if p.is_file()}
                 doc = mf.make_manifest(fabric.id, step, inputs, params, vers, outputs, result, seconds,
                                        pid=os.getpid(), finished_unix=time.time())
-                (scratch / mf.MANIFEST).write_text(json.dumps(doc, indent=1, sort_keys=True, default=str) + "\n")
+                write_text(scratch / mf.MANIFEST, json.dumps(doc, indent=1, sort_keys=True, default=str) + "\n")
                 if not store.commit(scratch, fabric.id, step, mf.MANIFEST):
                     doc = mf.parse_manifest(store.read_bytes(fabric.id, step, mf.MANIFEST)) or doc
             except BaseException:

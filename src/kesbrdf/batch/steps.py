@@ -30,6 +30,7 @@ import math
 import os
 from pathlib import Path
 
+from kesbrdf._atomic import write_bytes, write_text
 from kesbrdf.errors import KesbrdfError
 
 __all__ = ["STEPS", "DEPENDS", "STEP_FUNCTIONS", "RENDER_STEPS", "closure", "step_params",
@@ -147,7 +148,7 @@ def _finite(x):
 
 
 def _write_json(path: Path, doc) -> None:
-    path.write_text(json.dumps(doc, indent=1, sort_keys=True, default=float) + "\n", encoding="utf-8")
+    write_text(path, json.dumps(doc, indent=1, sort_keys=True, default=float) + "\n")
 
 
 def is_manifest(path: Path) -> bool:
@@ -191,7 +192,7 @@ def step_ingest(inputs: dict, params: dict, out: Path) -> dict:
     except UnicodeDecodeError:
         raise KesbrdfError(f"{src}: expected a measurement CSV (UTF-8 text), got binary data") from None
     m = parse_measurement(text, source=str(src))
-    (out / "measurement.csv").write_bytes(data)
+    write_bytes(out / "measurement.csv", data)
     return {"source": "csv", "n_samples": len(m)}
 
 

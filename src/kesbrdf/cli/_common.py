@@ -31,34 +31,57 @@ def print_metrics(result: dict, title: str = "") -> None:
     Console().print(table)
 
 
-def check_output(path, suffixes: tuple[str, ...], flag: str = "-o"):
+def check_output(path, suffixes: tuple[str, ...] = (), flag: str = "-o", folder: bool = False):
     """Check an output path before any long work starts; return it as a :class:`~pathlib.Path`.
 
-    The suffix must be one of ``suffixes`` (case-insensitive; ``()`` accepts any), the
-    path must not be an existing folder, and its nearest existing parent must be a
-    writable folder (missing folders are created when the output is written).
+    The one rule of every command's output (``-o``, ``--json``, ...; docs/decisions.md,
+    "Missing output folders"): kesbrdf creates the output and the one folder that holds
+    it, never the folders above: ``-o out/m.kes.json`` creates ``out`` when it is
+    missing, ``-o results/2026/m.kes.json`` with no ``results`` is an error naming
+    ``results`` (a mistyped path must not grow a tree silently).
+
+    For a file output (``folder=False``) the suffix must be one of ``suffixes``
+    (case-insensitive; ``()`` accepts any) and the path must not be an existing folder;
+    a folder output (``folder=True``: ``demo -o``, ``drape -o``) must not be an
+    existing file.  Every name must fit the file system's limit, and the nearest
+    existing folder must be a writable folder.
 
     Raises
     ------
     KesbrdfError
-        One line naming ``flag`` and the path.
+        One line naming ``flag``, the path and what is wrong.
     """
     import os
     from pathlib import Path
 
+    from kesbrdf._atomic import _name_max
+
     out = Path(path)
-    if suffixes and not out.name.lower().endswith(tuple(s.lower() for s in suffixes)):
-        raise KesbrdfError(
-            f"{flag} {out}: expected a file ending in {', '.join(suffixes)}, got {out.suffix or 'no suffix'!r}"
-        )
-    if out.is_dir():
-        raise KesbrdfError(f"{flag} {out}: expected a file name, got an existing folder")
-    parent = out.parent
+    holder = out.parent
+    limit = _name_max(holder)
+    for part in out.parts:
+        n = len(os.fsencode(part))
+        if n > limit:
+            raise KesbrdfError(f"{flag} {out}: file name too long ({n} bytes in {part[:24]}..., "
+                               f"at most {limit} on this file system)")
+    if not folder:
+        if suffixes and not out.name.lower().endswith(tuple(s.lower() for s in suffixes)):
+            raise KesbrdfError(
+                f"{flag} {out}: expected a file ending in {', '.join(suffixes)}, got {out.suffix or 'no suffix'!r}"
+            )
+        if out.is_dir():
+            raise KesbrdfError(f"{flag} {out}: expected a file name, got an existing folder")
+    elif out.exists() and not out.is_dir():
+        raise KesbrdfError(f"{flag} {out}: expected a folder, got an existing file")
+    parent = holder
     while not parent.exists() and parent != parent.parent:
         parent = parent.parent
     if not parent.is_dir():
         raise KesbrdfError(f"{flag} {out}: expected a folder to write into, but {parent} is a file")
+    if parent not in (holder, holder.parent):
+        missing = next(p for p in reversed(holder.parents) if not p.exists())
+        raise KesbrdfError(f"{flag} {out}: folder {missing} does not exist (kesbrdf creates only the folder "
+                           f"{holder} that holds the output; create the folders above it first)")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise KesbrdfError(f"{flag} {out}: folder {parent} is not writable")
     return out
-

@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 import time
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = "Fit, validate, report, export and preview every fabric of a catalogue on a (local) Dask cluster."
 
@@ -67,6 +67,10 @@ def run(args) -> int:
     from kesbrdf.batch import run_batch
     from kesbrdf.errors import KesbrdfError
 
+    from kesbrdf.batch.store import is_url
+
+    if not is_url(args.output):
+        check_output(args.output, folder=True)
     steps = tuple(s.strip() for s in args.steps.split(",") if s.strip())
     if not steps:
         raise KesbrdfError(f"--steps: expected comma-separated step names, got {args.steps!r}")

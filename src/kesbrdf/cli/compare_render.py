@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = "Render a reference BRDF and the KES model fitted from its virtual measurements side by side, with a FLIP map."
 
@@ -33,6 +33,7 @@ def run(args) -> int:
     from kesbrdf.render import compare
 
     opts = render_options(args, base_color=parse_rgb_flag(args.base_color, "--base-color"))
+    check_output(args.output, (".png",))
     stderr(f"comparing {args.reference} ({args.protocol} protocol) on the {args.scene}, "
            f"{opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
     models = ("kes", "fibre-prior") if args.with_prior else ("kes",)

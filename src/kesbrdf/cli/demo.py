@@ -12,7 +12,7 @@ import json
 import time
 from pathlib import Path
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = "Run the full chain on the embedded sample: ingest, fit, validate, figures, report, renders."
 
@@ -86,9 +86,9 @@ def run(args) -> int:
     from kesbrdf.diagnostics import diagnose
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
     from kesbrdf.validation import compare_reference, leave_one_orientation_out, validate
-    from kesbrdf._atomic import write_text
+    from kesbrdf._atomic import write_bytes, write_text
 
-    out = Path(args.output)
+    out = check_output(args.output, folder=True)
     out.mkdir(parents=True, exist_ok=True)
     say = _Stages()
 
@@ -103,7 +103,7 @@ def run(args) -> int:
         write_measurement(meas_path, result.measurement)
     else:
         say("acquire: embedded simulated measurement (virtual gonioreflectometer)")
-        meas_path.write_bytes(demo_data.embedded_measurement().read_bytes())
+        write_bytes(meas_path, demo_data.embedded_measurement().read_bytes())
     m = read_measurement(meas_path)
     reference = demo_data.embedded_reference()
 

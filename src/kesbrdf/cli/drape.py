@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import time
 
+from kesbrdf.cli._common import check_output
+
 HELP = "Simulate a satin drape (sheet onto a sphere, skirt on a dress form) and write a PLY sequence."
 
 
@@ -40,6 +42,7 @@ def run(args) -> int:
     except ImportError:  # pragma: no cover - rich is in the cli extra
         Progress = None
 
+    check_output(args.output, folder=True)
     t0 = time.perf_counter()
     kwargs = dict(fps=args.fps, resolution=args.resolution, seed=args.seed, overwrite=args.overwrite,
                   density_kg_m2=args.density_gsm / 1000.0)

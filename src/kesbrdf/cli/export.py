@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import json
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = "Export a model for other tools (Mitsuba/pbrt .bsdf, Mitsuba scene, ...); see docs/exports.md."
 
@@ -124,6 +124,7 @@ def run(args) -> int:
 
     if not args.model or not args.output:
         raise ExportError("export: expected MODEL and -o OUT (format from its ending, or --format FMT), or --list")
+    check_output(args.output)  # the folder rule; the format's endings are checked by export()
     fmt = resolve_format(args.fmt, args.output)
     if args.check_look:  # before the (slow) export: a renderer for the format, and installed
         from kesbrdf.export.looks import require_renderer

@@ -12,7 +12,7 @@ kind is an error.
 
 from __future__ import annotations
 
-from kesbrdf.cli._common import stderr
+from kesbrdf.cli._common import check_output, stderr
 
 HELP = ("Fit a model to a measurement CSV, CUReT abrdf.dat, RGL .bsdf or MERL .binary (kind chosen from "
         "the data); writes a model file (.kes.json).")
@@ -80,6 +80,7 @@ def run(args) -> int:
     from kesbrdf.cli._protocol import orientations
     from kesbrdf.io.sources import read_source
 
+    check_output(args.output)
     options = _options(args)
     m = read_source(args.measurement, sample=args.sample, protocol=args.protocol, step_deg=args.step_deg,
                     orientations_deg=orientations(args.orientations_deg))

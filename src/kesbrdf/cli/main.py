@@ -7,7 +7,9 @@ Each command lives in its own module ``kesbrdf.cli.<name>`` exposing
 * ``run(args) -> int``: parse nothing more, call one library function, report.
 
 User errors (:class:`kesbrdf.errors.KesbrdfError`, missing files, missing optional
-dependencies) are printed on one line to stderr and give exit code 2; no traceback.
+dependencies) and system errors (:class:`OSError`: disk full, read-only file system, ...;
+writes through :mod:`kesbrdf._atomic` arrive as :class:`~kesbrdf.errors.OutputError`)
+are printed on one line to stderr and give exit code 2; no traceback.
 Set ``KESBRDF_DEBUG=1`` to see tracebacks.
 """
 
@@ -114,6 +116,13 @@ def main(argv: list[str] | None = None) -> int:
             error(f"{exc.filename}: {exc.strerror}")
         else:
             error(str(exc))
+        return EXIT_USER_ERROR
+    except OSError as exc:  # any other system error (a write outside kesbrdf._atomic, a read)
+        if debug:
+            raise
+        from kesbrdf._atomic import describe
+
+        error(f"{exc.filename}: {describe(exc, exc.filename)}" if exc.filename else str(exc))
         return EXIT_USER_ERROR
     except ImportError as exc:
         if debug:

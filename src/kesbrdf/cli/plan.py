@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from kesbrdf.cli._common import REFERENCES, make_reference, stderr
+from kesbrdf.cli._common import REFERENCES, check_output, make_reference, stderr
 
 HELP = "Plan a measurement: expected hemisphere error of candidate protocols within a sample budget."
 
@@ -35,6 +35,9 @@ def run(args) -> int:
         raise KesbrdfError(f"-o {out}: expected a file ending in .json, got {out.suffix or 'no suffix'}")
     if args.plot and Path(args.plot).suffix.lower() not in (".png", ".svg", ".pdf"):
         raise KesbrdfError(f"--plot {args.plot}: expected a file ending in .png, .svg or .pdf")
+    check_output(out, (".json",))
+    if args.plot:
+        check_output(args.plot, (".png", ".svg", ".pdf"), "--plot")
     truths = {}
     for name in (REFERENCES if args.library else args.reference):
         truths[name] = make_reference(name)

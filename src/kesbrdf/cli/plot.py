@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from kesbrdf.cli._common import REFERENCES, stderr
+from kesbrdf.cli._common import REFERENCES, check_output, stderr
 
 HELP = "Draw the paper's figures (3a, 3b, 4, 5, 6) from a model, a measurement and a reference."
 
@@ -44,7 +44,8 @@ def _outputs(args) -> list[tuple[str, Path]]:
             raise KesbrdfError(f"-o {out}: expected a folder or a file ending in .png, .svg or .pdf, got .{suffix}")
         if len(names) > 1:
             raise KesbrdfError(f"-o {out}: expected a folder for --figure all, got a file name")
-        return [(names[0], out)]
+        return [(names[0], check_output(out))]
+    check_output(out, folder=True)
     return [(n, out / f"fig{n}.{args.format}") for n in names]
 
 

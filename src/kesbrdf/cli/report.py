@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from kesbrdf.cli._common import REFERENCES, stderr
+from kesbrdf.cli._common import REFERENCES, check_output, stderr
 
 HELP = "Write one self-contained HTML report: the paper's figures, metrics, diagnostics, provenance."
 
@@ -33,6 +33,9 @@ def run(args) -> int:
         raise KesbrdfError(f"-o {out}: expected a file ending in .html, got {out.suffix or 'no suffix'!r}")
     if args.figures_dir and Path(args.figures_dir).exists() and not Path(args.figures_dir).is_dir():
         raise KesbrdfError(f"--figures-dir {args.figures_dir}: expected a folder, got an existing file")
+    check_output(out, (".html", ".htm"))
+    if args.figures_dir:
+        check_output(args.figures_dir, flag="--figures-dir", folder=True)
     model, measurement, reference = load_inputs(args)
     stderr("computing metrics and diagnostics ...")
     metrics, diagnostics = collect(model, measurement, reference, mapping=args.mapping)

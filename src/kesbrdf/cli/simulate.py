@@ -76,6 +76,7 @@ def run(args) -> int:
 def _run_library(args) -> int:
     from kesbrdf.batch.library import simulate_library
 
+    check_output(args.output, folder=True)
     catalog = simulate_library(args.library, args.output, seed=args.seed, broken=args.broken)
     stderr(f"wrote {args.library} fabric(s) + {args.broken} broken one(s) and the catalogue {catalog}")
     return 0

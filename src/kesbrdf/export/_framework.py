@@ -11,8 +11,9 @@ A format is a module (named in ``FORMATS``) providing
     One line for ``kesbrdf export --list``.
 
 :func:`export` loads ``model`` if it is a path, checks the format name, the output path
-and the option names against the module's ``export`` signature, calls it, and fills in
-the sizes of the files written.
+and the option names against the module's ``export`` signature, checks that the format
+can hold the model's values (:func:`check_values`), calls it, and fills in the sizes of
+the files written.
 """
 
 from __future__ import annotations
@@ -25,7 +26,13 @@ from pathlib import Path
 
 from kesbrdf.errors import ExportError
 
-__all__ = ["ExportResult", "export", "format_module", "format_names", "check_output"]
+__all__ = ["ExportResult", "export", "format_module", "format_names", "check_output", "check_values",
+           "VALUE_MAX"]
+
+#: Largest f_r (1/sr) an export may have to write: the largest float32, the number type
+#: of every target — GPU shaders (glTF, MaterialX, USD, BRDF Explorer), tensor files
+#: (.bsdf), the renderers.  A format module may declare its own ``VALUE_MAX``.
+VALUE_MAX = 3.4028234663852886e38
 
 
 @dataclass
@@ -148,6 +155,48 @@ def _load_model(model):
     return model
 
 
+def check_values(model, fmt: str, module=None, source=None) -> None:
+    """Refuse, in one line, a model the format cannot write faithfully.
+
+    The model's arrays must hold what a model file may hold (finite, magnitude at most
+    :data:`kesbrdf.io.text.MAX_ABS_NUMBER`, NaN only where the kind allows it: the
+    checks of :func:`kesbrdf.io.model_file.model_from_dict`), and its largest f_r —
+    at most (largest tabulated value) / :data:`kesbrdf.mappings.COS_EPS`, reached at
+    grazing angles — must fit the format's ``VALUE_MAX`` (default :data:`VALUE_MAX`).
+    Objects that are not model kinds (a reference BRDF given to an analytic fit) pass.
+
+    Raises
+    ------
+    ExportError
+        ``FMT: cannot export SOURCE: ...`` naming the array and the value.
+    """
+    import numpy as np
+
+    from kesbrdf.errors import ModelError
+    from kesbrdf.mappings import COS_EPS
+
+    if not hasattr(model, "to_payload"):
+        return
+    from kesbrdf.io.model_file import model_from_dict, model_to_dict
+
+    name = source or "the model"
+    try:
+        model_from_dict(model_to_dict(model))
+    except ModelError as exc:
+        raise ExportError(f"{fmt}: cannot export {name}: {exc}") from None
+    limit = float(getattr(module, "VALUE_MAX", VALUE_MAX))
+    _, arrays = model.to_payload()
+    for key, a in arrays.items():
+        a = np.asarray(a, float)
+        finite = a[np.isfinite(a)]
+        peak = float(np.max(np.abs(finite))) if finite.size else 0.0
+        if peak / COS_EPS > limit:
+            raise ExportError(
+                f"{fmt}: cannot export {name}: array {key!r} holds {peak:.3g}, so f_r reaches "
+                f"{peak / COS_EPS:.3g} 1/sr at grazing angles, beyond the format's range {limit:.3g}"
+            )
+
+
 def export(model, fmt: str, out, **options) -> ExportResult:
     """Export ``model`` in format ``fmt`` to ``out`` (``docs/exports.md``).
 
@@ -169,12 +218,15 @@ def export(model, fmt: str, out, **options) -> ExportResult:
     Raises
     ------
     ExportError
-        Unknown format, bad output path, unknown option.
+        Unknown format, bad output path, unknown option, a model the format cannot hold
+        (:func:`check_values`).
     """
     module = format_module(fmt)
     out = check_output(fmt, module, out)
     _check_options(fmt, module, options)
+    source = str(model) if isinstance(model, (str, os.PathLike)) else None
     model = _load_model(model)
+    check_values(model, fmt, module, source)
     result = module.export(model, out, **options)
     if not isinstance(result, ExportResult) and hasattr(result, "to_json"):
         result = result.to_json()

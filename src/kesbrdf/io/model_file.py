@@ -9,7 +9,10 @@ The kind's ``from_payload`` checks its own arrays (shapes, grids, values).
 No pickle anywhere: ``load_model(save_model(m))`` rebuilds an identical model from
 plain JSON and raw little-endian bytes.  Every malformed file gives a one-line
 :class:`~kesbrdf.errors.ModelError` naming it: types and shapes are checked before
-any allocation, nesting is bounded, non-finite tables are refused.
+any allocation, nesting is bounded, and every number — JSON field or array element —
+must be finite and of magnitude at most :data:`~kesbrdf.io.text.MAX_ABS_NUMBER` (the
+bound of the CSV readers), so no product in evaluation or export overflows.  NaN is
+allowed only in arrays whose kind gives it a meaning (``q_nodes``: unmeasured).
 """
 
 from __future__ import annotations
@@ -24,7 +27,8 @@ import numpy as np
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
-from kesbrdf.io.files import read_regular
+from kesbrdf.io.files import open_regular
+from kesbrdf.io.text import MAX_ABS_NUMBER
 from kesbrdf.kinds import kind_class
 
 __all__ = [
@@ -43,14 +47,18 @@ __all__ = [
 
 FORMAT = "kesbrdf-model"
 FORMAT_VERSION = 1
-#: Largest array a model file may hold (elements): 2**27 doubles = 1 GiB.
-MAX_ARRAY_ELEMENTS = 1 << 27
-#: Largest model file read (bytes).
-MAX_FILE_BYTES = 2 << 30
+#: Most array elements a model file may hold, in one array and in all together: 2**24
+#: doubles = 128 MiB.  The largest table kesbrdf fits is a kes-halfdiff at the finest
+#: 1° θ step, 360 × 91 × 91 × 3 channels ≈ 8.9 million (docs/formats.md).
+MAX_ARRAY_ELEMENTS = 1 << 24
+#: Largest model file read (bytes): the base64 text of MAX_ARRAY_ELEMENTS doubles
+#: (171 MiB) plus room for the JSON fields.  Loading costs about 3× the file size.
+MAX_FILE_BYTES = 192 << 20
 #: Deepest JSON nesting accepted (the writer's deepest is ~6).
 MAX_DEPTH = 64
 #: Array dtypes accepted on reading (the writer writes ``<f8``).
 DTYPES = ("<f8", "<f4")
+_BOUND = f"{MAX_ABS_NUMBER:g}".replace("e+", "e")  # "1e100"
 _SHARED = ("channels", "input", "parameters", "diagnostics")
 
 
@@ -96,20 +104,45 @@ def decode_array(obj, name: str = "array", source=None) -> np.ndarray:
         raise ModelError(f"{prefix}expected base64 data, got invalid characters or padding") from None
     if len(raw) != n_bytes:
         raise ModelError(f"{prefix}expected {n_bytes} bytes for shape {shape}, got {len(raw)}")
-    return np.frombuffer(raw, dtype=dtype).reshape(shape).astype(float)
+    a = np.frombuffer(raw, dtype=dtype).reshape(shape).astype(float)
+    del raw
+    with np.errstate(invalid="ignore"):
+        bad = np.abs(a) > MAX_ABS_NUMBER  # ±inf included; NaN is the kind's to judge
+    if bad.any():
+        where_bad = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ModelError(f"{prefix}expected finite values of magnitude at most {_BOUND}, got "
+                         f"{float(a[where_bad])!r} at index {list(where_bad)} ({int(bad.sum())} such value(s))")
+    return a
 
 
-def _check_depth(doc, source) -> None:
-    """Iterative nesting check (no recursion on hostile input)."""
-    stack = [(doc, 1)]
+def _field_name(path: tuple) -> str:
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")[:120] or "document"
+
+
+def _check_tree(doc, source) -> None:
+    """Nesting depth and the range of every JSON number, iteratively (no recursion on hostile input).
+
+    The first bad number gives a one-line ModelError naming its field (``parameters.body``,
+    ``prior.theta.alpha``, ``support.psi_deg[2]``); array data (base64 text) is checked
+    by :func:`decode_array`.
+    """
+    stack = [(doc, ())]
     while stack:
-        node, depth = stack.pop()
-        if depth > MAX_DEPTH:
+        node, path = stack.pop()
+        if len(path) >= MAX_DEPTH:
             raise ModelError(f"{where(source)}expected JSON nested at most {MAX_DEPTH} deep, got deeper")
         if isinstance(node, dict):
-            stack.extend((v, depth + 1) for v in node.values())
+            stack.extend((v, path + (str(k),)) for k, v in node.items())
         elif isinstance(node, list):
-            stack.extend((v, depth + 1) for v in node)
+            stack.extend((v, path + (i,)) for i, v in enumerate(node))
+        elif isinstance(node, (int, float)) and not isinstance(node, bool):
+            if not (math.isfinite(node) and abs(node) <= MAX_ABS_NUMBER):
+                if isinstance(node, int):
+                    shown = f"an integer of {len(str(abs(node)))} digits"
+                else:  # JSON has no inf: a non-finite float is a number text that overflowed
+                    shown = repr(node) if math.isfinite(node) else "a number that overflows a double"
+                raise ModelError(f"{where(source)}{_field_name(path)}: expected a finite number of magnitude "
+                                 f"at most {_BOUND}, got {shown}")
 
 
 def model_to_dict(model) -> dict:
@@ -147,29 +180,33 @@ def load_model(path):
         size = 0
     if size > MAX_FILE_BYTES:
         raise ModelError(f"{where(path)}expected a model file of at most {MAX_FILE_BYTES} bytes, got {size}")
-    raw = read_regular(path)
+    with open_regular(path) as fh:  # bounded read: a file that grows, a FIFO, /dev/zero
+        raw = fh.read(MAX_FILE_BYTES + 1)
+    if len(raw) > MAX_FILE_BYTES:
+        raise ModelError(f"{where(path)}expected a model file of at most {MAX_FILE_BYTES} bytes, got more")
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError:
         raise ModelError(f"{where(path)}expected a kesbrdf model file (JSON), got binary data") from None
-    return model_from_text(text, source=path)
+    del raw  # peak memory: the text, the parsed document and one decoded array at a time
+    doc = _parse(text, path)
+    del text
+    return model_from_dict(doc, source=path)
 
 
 def _no_constant(name):
     raise ValueError(f"{name} is not valid JSON")
 
 
-def _finite_float(text):
-    value = float(text)
-    if not math.isfinite(value):
-        raise ValueError(f"number {text[:30]} overflows a double")
-    return value
-
-
 def model_from_text(text: str, source=None):
     """Parse and check a model document given as text."""
+    return model_from_dict(_parse(text, source), source=source)
+
+
+def _parse(text: str, source=None):
+    """The JSON document of ``text``; a one-line ModelError for anything that is not JSON."""
     try:
-        doc = json.loads(text, parse_constant=_no_constant, parse_float=_finite_float)
+        doc = json.loads(text, parse_constant=_no_constant)  # numbers: range-checked by field
     except json.JSONDecodeError as exc:
         raise ModelError(
             f"{where(source, exc.lineno)}expected a kesbrdf model file (JSON), got invalid JSON: {exc.msg}"
@@ -178,7 +215,7 @@ def model_from_text(text: str, source=None):
         raise ModelError(f"{where(source)}expected JSON nested at most {MAX_DEPTH} deep, got deeper") from None
     except ValueError as exc:  # NaN/Infinity constants, huge integers
         raise ModelError(f"{where(source)}expected a kesbrdf model file (JSON), got {exc}") from None
-    return model_from_dict(doc, source=source)
+    return doc
 
 
 def model_from_dict(doc, source=None):
@@ -186,7 +223,7 @@ def model_from_dict(doc, source=None):
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
         raise ModelError(f"{where(source)}expected format {FORMAT!r}, got {str(got)[:60]!r}")
-    _check_depth(doc, source)
+    _check_tree(doc, source)
     version = doc.get("format_version")
     if not _is_int(version) or version != FORMAT_VERSION:
         raise ModelError(f"{where(source)}expected model format version {FORMAT_VERSION}, got {repr(version)[:40]}")

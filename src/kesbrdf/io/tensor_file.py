@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from kesbrdf.errors import FormatError, where
+from kesbrdf.errors import ExportError, FormatError, where
 from kesbrdf.io.files import read_regular
 
 __all__ = ["read_tensor_file", "write_tensor_file", "tensor_file_bytes", "DTYPE_CODES", "MAGIC"]
@@ -39,7 +39,9 @@ def tensor_file_bytes(fields: dict) -> bytes:
     """The bytes of a tensor file holding ``fields`` (name -> array, in that order).
 
     Arrays keep their dtype (converted to little-endian); a ``str`` or ``bytes`` value is
-    stored as a u8 array (how the RGL files store ``description``).
+    stored as a u8 array (how the RGL files store ``description``).  Float arrays must be
+    finite (an ExportError names the field otherwise: no renderer reads NaN or inf
+    tables faithfully).
     """
     arrays = []
     for name, value in fields.items():
@@ -52,6 +54,9 @@ def tensor_file_bytes(fields: dict) -> bytes:
         dt = a.dtype.newbyteorder("<") if a.dtype.byteorder == ">" else a.dtype
         if dt not in DTYPE_CODES:
             raise FormatError(f"tensor file field {name!r}: expected a numeric dtype, got {a.dtype}")
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise ExportError(f"tensor file field {name!r}: expected finite values, got "
+                              f"{int(np.count_nonzero(~np.isfinite(a)))} NaN or inf (beyond the {a.dtype} range?)")
         arrays.append((name.encode("ascii"), a.astype(dt, copy=False)))
     header = len(MAGIC) + 2 + 4 + sum(2 + len(n) + 2 + 1 + 8 + 8 * a.ndim for n, a in arrays)
     offset = -(-header // _ALIGN) * _ALIGN

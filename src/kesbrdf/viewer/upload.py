@@ -13,6 +13,7 @@ import re
 import tempfile
 from pathlib import Path
 
+from kesbrdf._atomic import write_bytes
 from kesbrdf.errors import KesbrdfError, ModelError
 from kesbrdf.viewer.limits import ViewerLimits
 
@@ -78,7 +79,7 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
     safe = safe_upload_name(name)
     with tempfile.TemporaryDirectory(prefix="kesbrdf-view-") as tmp:
         csv_path = Path(tmp) / safe
-        csv_path.write_bytes(data)
+        write_bytes(csv_path, data)
         prefix = str(Path(tmp)) + os.sep
         try:
             measurement = read_measurement(csv_path)
