@@ -6,10 +6,13 @@ The agreement is checked in two steps that together cover the file:
    baked table (SwiftShader compiles large constant arrays slowly);
 2. the numpy port on the full-resolution table equals :func:`kesbrdf.brdf.evaluate`
    to float64 rounding, and the default downsampled table's error is bounded.
+Both for a current model file (bounded foreshortening, fading lobe) and a file written
+before those parameters existed (√(cos θ_i cos θ_r), last column held; docs/formats.md).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -32,6 +35,19 @@ PORT_REL_TOL = 1e-9
 #: p90 0.09 %, max 1 %; bounds with margin
 DOWNSAMPLE_P90_TOL = 0.005
 DOWNSAMPLE_MAX_TOL = 0.05
+
+
+@pytest.fixture(params=["current", "legacy"])
+def any_model(request, kes_model):
+    """The test fabric as fitted now, and as a file without ``normalisation`` /
+    ``extrapolation`` reads (the same table, evaluated the old way)."""
+    if request.param == "current":
+        assert (kes_model.normalisation, kes_model.extrapolation) == ("bounded", "fade")
+        return kes_model
+    params = {k: v for k, v in kes_model.parameters.items() if k not in ("normalisation", "extrapolation")}
+    legacy = dataclasses.replace(kes_model, parameters=params)
+    assert (legacy.normalisation, legacy.extrapolation) == ("sqrtcos", "hold")
+    return legacy
 
 
 def _pairs(rng, n, max_theta_deg=80.0):
@@ -78,11 +94,12 @@ def test_glslang_compiles_with_brdf_explorer_header(tmp_path, kes_model):
 
 
 @pytest.mark.parametrize("mapping", ["deviation", "halfvector"])
-def test_numpy_port_at_full_resolution_equals_kesbrdf_evaluate(kes_model, rng, mapping):
+def test_numpy_port_at_full_resolution_equals_kesbrdf_evaluate(any_model, rng, mapping):
+    # up to 89°: γ reaches past γ_max + 6° (fade) and one cosine below a quarter of the other (bounded w)
     wi, wr = _pairs(rng, 3000, max_theta_deg=89.0)
-    table, d_gamma = be.resample_table(kes_model, kes_model.phi_grid.size, kes_model.gamma_grid.size)
-    port = be.numpy_port(table, d_gamma, be._body3(kes_model), wi, wr, halfvector=mapping == "halfvector")
-    ref = evaluate(kes_model, wi, wr, mapping)
+    table, d_gamma = be.resample_table(any_model, any_model.phi_grid.size, any_model.gamma_grid.size)
+    port = be.numpy_port(table, d_gamma, be._body3(any_model), wi, wr, halfvector=mapping == "halfvector", **be.lobe_parameters(any_model))
+    ref = evaluate(any_model, wi, wr, mapping)
     np.testing.assert_allclose(port, ref, rtol=PORT_REL_TOL)
 
 
@@ -93,7 +110,7 @@ def test_default_table_downsampling_error_is_bounded(kes_model):
     assert err["p90_rel"] < DOWNSAMPLE_P90_TOL and err["max_rel"] < DOWNSAMPLE_MAX_TOL, err
 
 
-def test_glsl_in_browser_equals_numpy_port(tmp_path, kes_model, rng):
+def test_glsl_in_browser_equals_numpy_port(tmp_path, any_model, rng):
     node = shutil.which("node")
     chromium = shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
     if node is None or chromium is None:
@@ -101,7 +118,7 @@ def test_glsl_in_browser_equals_numpy_port(tmp_path, kes_model, rng):
     if not (VIEWER / "node_modules" / "playwright-core").is_dir():
         pytest.fail("viewer/node_modules/playwright-core is missing: run `make viewer`")
     n_phi = 12
-    text, info = be.brdf_explorer_source(kes_model, n_phi=n_phi)
+    text, info = be.brdf_explorer_source(any_model, n_phi=n_phi)
     wi, wr = _pairs(rng, 1000)
     results = {}
     for halfvector in (0, 1):
@@ -111,9 +128,9 @@ def test_glsl_in_browser_equals_numpy_port(tmp_path, kes_model, rng):
         proc = subprocess.run([node, str(VIEWER / "scripts" / "glsl-eval.mjs"), str(inp), str(out)], cwd=VIEWER, capture_output=True, text=True, timeout=240)
         assert proc.returncode == 0, proc.stderr[-2000:]
         results[halfvector] = np.array(json.loads(out.read_text())["f"])
-    table, d_gamma = be.resample_table(kes_model, info["n_phi"], info["n_gamma"])
+    table, d_gamma = be.resample_table(any_model, info["n_phi"], info["n_gamma"])
     for halfvector, f in results.items():
-        port = be.numpy_port(table, d_gamma, be._body3(kes_model), wi, wr, halfvector=bool(halfvector))
+        port = be.numpy_port(table, d_gamma, be._body3(any_model), wi, wr, halfvector=bool(halfvector), **be.lobe_parameters(any_model))
         np.testing.assert_allclose(f, port, rtol=GLSL_REL_TOL, err_msg=f"halfvector={halfvector}")
 
 

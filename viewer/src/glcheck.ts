@@ -85,6 +85,10 @@ export function evalPairsGL(
   gl.uniform1i(gl.getUniformLocation(prog, 'kesNPhi'), model.nPhi);
   gl.uniform1i(gl.getUniformLocation(prog, 'kesNGamma'), model.nGamma);
   gl.uniform1f(gl.getUniformLocation(prog, 'kesDGamma'), model.dGamma);
+  gl.uniform1f(gl.getUniformLocation(prog, 'kesLambda'), model.lambda);
+  gl.uniform1f(gl.getUniformLocation(prog, 'kesGammaMax'), model.gammaMax);
+  gl.uniform1f(gl.getUniformLocation(prog, 'kesFadeSlope'), model.fadeSlope);
+  gl.uniform1f(gl.getUniformLocation(prog, 'kesLineSum'), model.lineSum);
   gl.uniform1i(gl.getUniformLocation(prog, 'kesMapping'), MAPPING_CODE[mapping]);
   gl.uniform3fv(gl.getUniformLocation(prog, 'kesBody'), body ?? t.body);
 

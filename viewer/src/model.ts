@@ -13,6 +13,17 @@ export const MAPPINGS: Mapping[] = ['deviation', 'halfvector', 'paper'];
 /** Integer codes used by the GLSL chunk (uniform kesMapping). */
 export const MAPPING_CODE: Record<Mapping, number> = { deviation: 0, halfvector: 1, paper: 2 };
 
+/** Foreshortening normalisations (docs/formats.md step 3; kesbrdf.mappings.NORMALISATIONS). */
+export type Normalisation = 'bounded' | 'sqrtcos';
+export const NORMALISATIONS: Normalisation[] = ['bounded', 'sqrtcos'];
+/** The lobe beyond the last measured γ (docs/formats.md step 2; kesbrdf.mappings.EXTRAPOLATIONS). */
+export type Extrapolation = 'fade' | 'hold';
+export const EXTRAPOLATIONS: Extrapolation[] = ['fade', 'hold'];
+/** λ of the `bounded` normalisation (kesbrdf.mappings.BOUNDED_LAMBDA). */
+export const BOUNDED_LAMBDA = 0.5;
+/** Width of the `fade`, radians of γ (kesbrdf.mappings.FADE_DEG = 6°). */
+export const FADE_WIDTH = (6 * Math.PI) / 180;
+
 export interface ArrayJson {
   dtype: string;
   shape: number[];
@@ -28,6 +39,19 @@ export interface KesModel {
   /** grid step in γ, radians */
   dGamma: number;
   gammaMax: number;
+  /** parameters.normalisation; absent (files written before it): 'sqrtcos' */
+  normalisation: Normalisation;
+  /** parameters.extrapolation; absent: 'hold' */
+  extrapolation: Extrapolation;
+  /**
+   * λ of w = max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)): BOUNDED_LAMBDA for
+   * 'bounded', 0 for 'sqrtcos' (w is then the geometric mean); uniform kesLambda.
+   */
+  lambda: number;
+  /** fade(γ) = clamp(1 − (γ − gammaMax)·fadeSlope, 0, 1): 1/FADE_WIDTH for 'fade', 0 for 'hold'. */
+  fadeSlope: number;
+  /** θ_i + θ_r of the incidence line the table was fitted on, radians (the paper mapping). */
+  lineSum: number;
   /** (nPhi, nGamma, C) lobe q, C-order */
   table: Float64Array;
   /** (C,) Lambertian body term, 1/sr */
@@ -99,6 +123,18 @@ export function parseModel(doc: any, name: string): KesModel {
     throw new Error(`${name}: expected ${C} channels and body values, got ${channels.length} and ${body.data.length}`);
   }
   if (nGamma < 2) throw new Error(`${name}: expected at least 2 gamma grid points, got ${nGamma}`);
+  const params = doc.parameters ?? {};
+  const normalisation = params.normalisation ?? 'sqrtcos';
+  const extrapolation = params.extrapolation ?? 'hold';
+  if (!NORMALISATIONS.includes(normalisation)) {
+    throw new Error(`${name}: parameters.normalisation: expected one of ${NORMALISATIONS.join(', ')}, got ${JSON.stringify(normalisation)?.slice(0, 40)}`);
+  }
+  if (!EXTRAPOLATIONS.includes(extrapolation)) {
+    throw new Error(`${name}: parameters.extrapolation: expected one of ${EXTRAPOLATIONS.join(', ')}, got ${JSON.stringify(extrapolation)?.slice(0, 40)}`);
+  }
+  // kesbrdf.model.Model.line_sum: diagnostics first, then parameters, 90° by default
+  const lineDeg = Number(doc.diagnostics?.incidence_line_deg ?? params.incidence_line_deg ?? 90);
+  const lineSum = Number.isFinite(lineDeg) ? (lineDeg * Math.PI) / 180 : Math.PI / 2;
   let gammaNodes: Float64Array<ArrayBuffer> = new Float64Array(0);
   let qNodes: Float64Array<ArrayBuffer> = new Float64Array(0);
   if (arrays.gamma_nodes && arrays.q_nodes) {
@@ -113,6 +149,11 @@ export function parseModel(doc: any, name: string): KesModel {
     nGamma,
     dGamma: gamma.data[1] - gamma.data[0],
     gammaMax: gamma.data[nGamma - 1],
+    normalisation,
+    extrapolation,
+    lambda: normalisation === 'bounded' ? BOUNDED_LAMBDA : 0,
+    fadeSlope: extrapolation === 'fade' ? 1 / FADE_WIDTH : 0,
+    lineSum,
     table: table.data,
     body: body.data,
     gammaNodes,
@@ -185,6 +226,34 @@ export function pick(values: ArrayLike<number>, ch: number): number {
 const GAMMA0_EPS = 1e-12;
 
 /**
+ * Foreshortening weight w of f_r = c + fade·q/w (docs/formats.md step 3,
+ * kesbrdf.mappings.foreshortening): max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)).
+ */
+export function foreshortening(m: KesModel, cosI: number, cosR: number): number {
+  const ci = Math.max(cosI, 0);
+  const cr = Math.max(cosR, 0);
+  return Math.max(Math.sqrt(ci * cr), m.lambda * Math.max(ci, cr));
+}
+
+/** The lobe's factor beyond the last measured γ (docs/formats.md step 2, kesbrdf.mappings.fade). */
+export function fade(m: KesModel, gamma: number): number {
+  return Math.min(Math.max(1 - (gamma - m.gammaMax) * m.fadeSlope, 0), 1);
+}
+
+/**
+ * √(cos θ_i cos θ_r) / w on the incidence line θ_i + θ_r = lineSum at deviation |γ|
+ * (kesbrdf.mappings.line_foreshortening): 1 for 'sqrtcos'. The paper mapping reads the
+ * measured (f − c)·√(cos θ_i cos θ_r) back from a table that holds (f − c)·w.
+ */
+export function lineRatio(m: KesModel, gamma: number): number {
+  if (m.lambda === 0) return 1;
+  const g = Math.abs(gamma);
+  const geo = Math.sqrt(Math.max((Math.cos(g) + Math.cos(m.lineSum)) / 2, 0));
+  const cosHi = Math.cos(Math.min(Math.max((m.lineSum - g) / 2, 0), Math.PI / 2));
+  return geo / Math.max(geo, m.lambda * cosHi);
+}
+
+/**
  * (φ, γ) of a direction pair for the deviation or halfvector mapping (docs/formats.md step 1).
  */
 export function toPhiGamma(wi: Vec3, wr: Vec3, mapping: Mapping): [number, number] {
@@ -226,7 +295,7 @@ export function toPhiGamma(wi: Vec3, wr: Vec3, mapping: Mapping): [number, numbe
 const PAPER_MIN_SIN_BETA = 1e-6;
 
 /**
- * Paper eq. 3–4 literally, as kesbrdf.brdf evaluates it: ρ_KES = q(φ, |γ|) +
+ * Paper eq. 3–4 literally, as kesbrdf.model evaluates it: ρ_KES = q(φ, |γ|)·lineRatio +
  * body·√(cos γ / 2) (the measured quantity on the θ_i + θ_r = 90° line) with
  * φ = π/2 − (φ_i + φ_r) (+π when γ = θ_r − θ_i < 0), divided by √(cos θ_i cos θ_r)·sin β.
  */
@@ -242,14 +311,15 @@ function paperEvaluate(m: KesModel, wi: Vec3, wr: Vec3, out: Float64Array, body:
   const sinHalfBeta = Math.min(Math.max(0.5 * Math.sqrt(s * s + c * c), 0), 1);
   const sinBeta = Math.max(Math.sin(2 * Math.asin(sinHalfBeta)), PAPER_MIN_SIN_BETA);
   lookup(m, phi, Math.abs(gamma), out);
+  const ratio = lineRatio(m, gamma);
   const bodyScale = Math.sqrt(Math.max(Math.cos(gamma), 0) / 2);
   const norm = 1 / (Math.sqrt(wi[2] * wr[2]) * sinBeta);
-  for (let k = 0; k < m.nChannels; k++) out[k] = (out[k] + body[Math.min(k, body.length - 1)] * bodyScale) * norm;
+  for (let k = 0; k < m.nChannels; k++) out[k] = (out[k] * ratio + body[Math.min(k, body.length - 1)] * bodyScale) * norm;
   return out;
 }
 
 /**
- * f_r (1/sr) of the model for one pair, per channel (docs/formats.md step 3).
+ * f_r = c + fade(γ)·q/w (1/sr) of the model for one pair, per channel (docs/formats.md steps 1–3).
  * `body` replaces the model's body term when given (DESIGN §5 colourways).
  */
 export function evaluate(
@@ -267,7 +337,7 @@ export function evaluate(
   if (mapping === 'paper') return paperEvaluate(m, wi, wr, out, body ?? m.body);
   const [phi, gamma] = toPhiGamma(wi, wr, mapping);
   lookup(m, phi, gamma, out);
-  const norm = 1 / Math.sqrt(wi[2] * wr[2]);
+  const norm = fade(m, gamma) / foreshortening(m, wi[2], wr[2]);
   for (let c = 0; c < m.nChannels; c++) out[c] = (body ? body[Math.min(c, body.length - 1)] : m.body[c]) + out[c] * norm;
   return out;
 }

@@ -131,7 +131,7 @@ export function drawRhoGamma(canvas: HTMLCanvasElement, m: KesModel, ch: number,
   if (!logY) ymin = Math.min(0, ymin);
   if (ymax <= ymin) ymax = ymin + 1;
   const f: Frame = { x0: 70, y0: 30, w: canvas.width - 90, h: canvas.height - 80, xmin: -gmax * DEG, xmax: gmax * DEG, ymin, ymax: ymax + 0.05 * (ymax - ymin) };
-  axes(ctx, f, 'γ = θr − θi (deg)', logY ? 'q (1/sr, log)' : 'q = (fr − body)·√(cosθi cosθr)  (1/sr)', logY);
+  axes(ctx, f, 'γ = θr − θi (deg)', logY ? 'q (1/sr, log)' : m.normalisation === 'bounded' ? 'q = (fr − body)·w  (1/sr)' : 'q = (fr − body)·√(cosθi cosθr)  (1/sr)', logY);
   curves.forEach((pts, k) => {
     ctx.strokeStyle = ORIENTATION_COLOURS[k];
     ctx.lineWidth = 1.5;

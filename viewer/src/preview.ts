@@ -146,6 +146,10 @@ export class Preview {
         kesNPhi: { value: 1 },
         kesNGamma: { value: 2 },
         kesDGamma: { value: 1 },
+        kesLambda: { value: 0 },
+        kesGammaMax: { value: 1 },
+        kesFadeSlope: { value: 0 },
+        kesLineSum: { value: Math.PI / 2 },
         kesBody: { value: new THREE.Vector3() },
         kesMapping: { value: 0 },
         lightDir: { value: new THREE.Vector3(0, 0.5, 0.866) },
@@ -173,6 +177,10 @@ export class Preview {
     u.kesNPhi.value = m.nPhi;
     u.kesNGamma.value = m.nGamma;
     u.kesDGamma.value = m.dGamma;
+    u.kesLambda.value = m.lambda;
+    u.kesGammaMax.value = m.gammaMax;
+    u.kesFadeSlope.value = m.fadeSlope;
+    u.kesLineSum.value = m.lineSum;
     this.updateBody();
   }
 

@@ -133,11 +133,16 @@ def _decode(a) -> np.ndarray:
 
 
 def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
-    """docs/formats.md 'How to evaluate a model', used only when kesbrdf.brdf is absent."""
+    """docs/formats.md 'How to evaluate a model', used only when kesbrdf.brdf is absent
+    (parameters.normalisation / extrapolation as there: absent means sqrtcos / hold)."""
     arrays = doc["arrays"]
     table, body = _decode(arrays["table"]), _decode(arrays["body"])
     gamma_grid = _decode(arrays["gamma_grid"])
     n_phi, n_gamma = table.shape[:2]
+    params = doc.get("parameters") or {}
+    lam = 0.5 if params.get("normalisation", "sqrtcos") == "bounded" else 0.0
+    slope = 1.0 / np.radians(6.0) if params.get("extrapolation", "hold") == "fade" else 0.0
+    line_sum = np.radians(float((doc.get("diagnostics") or {}).get("incidence_line_deg", params.get("incidence_line_deg", 90.0))))
     scale = np.ones(wi.shape[:-1])
     if mapping == "deviation":
         m = wi * np.array([-1.0, -1.0, 1.0])
@@ -158,8 +163,11 @@ def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
         phi = np.where(gamma < 0, phi + np.pi, phi)
         gamma = np.abs(gamma)
         sin_half_beta = np.minimum(0.5 * np.sqrt(np.sin(p_r - p_i - np.pi) ** 2 + np.cos(t_r) ** 2), 1)
-        scale = 1 / np.maximum(np.sin(2 * np.arcsin(sin_half_beta)), 1e-6)
+        sin_beta = np.maximum(np.sin(2 * np.arcsin(sin_half_beta)), 1e-6)
         body_paper = body * np.sqrt(np.clip(np.cos(t_r - t_i), 0, None) / 2)[..., None]
+        if lam > 0:  # the table holds (f - c)·w; the paper reads (f - c)·√(cos θ_i cos θ_r) on the line
+            geo = np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2, 0, None))
+            scale = scale * geo / np.maximum(geo, lam * np.cos(np.clip((line_sum - gamma) / 2, 0, np.pi / 2)))
     if mapping != "paper":
         d = (wr - wi)[..., :2]
         small = np.hypot(s[..., 0], s[..., 1]) < 1e-12
@@ -175,9 +183,11 @@ def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
     i1 = (i0 + 1) % n_phi
     q = (1 - fu) * ((1 - fv) * table[i0, j0] + fv * table[i0, j1]) + fu * ((1 - fv) * table[i1, j0] + fv * table[i1, j1])
     if mapping == "paper":
-        f = (q + body_paper) * (scale / np.sqrt(wi[..., 2] * wr[..., 2]))[..., None]
+        f = (q * scale[..., None] + body_paper) * (1 / (np.sqrt(wi[..., 2] * wr[..., 2]) * sin_beta))[..., None]
     else:
-        f = body + q * (scale / np.sqrt(wi[..., 2] * wr[..., 2]))[..., None]
+        w = np.maximum(np.sqrt(wi[..., 2] * wr[..., 2]), lam * np.maximum(wi[..., 2], wr[..., 2]))
+        fade = np.clip(1 - (gamma - gamma_grid[-1]) * slope, 0, 1)
+        f = body + q * (fade / w)[..., None]
     return np.where(((wi[..., 2] > 0) & (wr[..., 2] > 0))[..., None], f, 0.0)
 
 

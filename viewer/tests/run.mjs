@@ -234,6 +234,23 @@ async function main() {
         `unexpected message ${message}`);
     });
 
+    await test('a model file with an unknown normalisation or extrapolation is refused', async () => {
+      // the Python reader refuses these (kesbrdf.model.Model.from_payload); shading them
+      // the old way would disagree with kesbrdf.brdf.evaluate silently
+      for (const [key, value] of [['normalisation', 'cosine'], ['extrapolation', 'mirror']]) {
+        const message = await page.evaluate(([doc, k, v]) => {
+          try {
+            window.kesbrdf.loadModelDoc({ ...doc, parameters: { ...doc.parameters, [k]: v } }, 'odd.kes.json');
+            return null;
+          } catch (e) {
+            return e.message;
+          }
+        }, [asymDoc, key, value]);
+        assert(message !== null && message.startsWith(`odd.kes.json: parameters.${key}: expected one of`) && message.includes(`"${value}"`),
+          `unexpected message for ${key} = ${value}: ${message}`);
+      }
+    });
+
     await test(`GLSL shading agrees with Python (${ref.source}) within ${GLSL_REL_TOL} relative`, async () => {
       const report = { ward: await agreement(ref, 'fitted Ward model') };
       // an asymmetric lobe: a mirrored or transposed table lookup would fail here

@@ -6,9 +6,12 @@ it pastes into its own shader templates (``#version 410``, one ``uniform`` per
 parameter at ``::INSERT_UNIFORMS_HERE::``).  The function written here evaluates the
 extended-KES model exactly as :func:`kesbrdf.brdf.evaluate` does (docs/formats.md,
 "How to evaluate a model"): (φ, γ) by the deviation or half-vector mapping, bilinear
-lookup of the table q (periodic in φ, γ clamped), f_r = c + q/√(cos θ_i cos θ_r);
-the table and the body term are baked into constant arrays.  So the polar, 3-D,
-albedo and lit-sphere views show the model, not a fit.
+lookup of the table q (periodic in φ, γ clamped), f_r = c + fade(γ)·q/w with the
+foreshortening weight w and the fade beyond the last measured γ that the model file's
+``parameters.normalisation`` and ``parameters.extrapolation`` name (files without them:
+w = √(cos θ_i cos θ_r) and the last column held; :func:`lobe_parameters`); the table, the
+body term and those two choices are baked into constants.  So the polar, 3-D, albedo and
+lit-sphere views show the model, not a fit.
 
 Parameters exposed in BRDF Explorer: ``bool halfvector`` (mapping; default: the
 model's ``deviation``), ``float scale`` (multiplies f_r, default 1), ``color tint``
@@ -34,8 +37,9 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.mappings import BOUNDED_LAMBDA, EXTRAPOLATIONS, FADE_DEG, NORMALISATIONS
 
-__all__ = ["export", "brdf_explorer_source", "resample_table", "glsl_function", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
+__all__ = ["export", "brdf_explorer_source", "resample_table", "lobe_parameters", "glsl_function", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
 
 #: Largest baked table: entries per channel.  Each channel is its own ``const float``
 #: array: ANGLE (Chromium's WebGL) rejects a private variable over 64 KiB ("Size of
@@ -112,6 +116,34 @@ def _default_grid(model):
     return n_phi, n_gamma
 
 
+def lobe_parameters(model) -> dict:
+    """How the model scales its lobe (docs/formats.md, "How to evaluate a model", steps 2–3):
+    ``normalisation``, ``extrapolation`` and ``gamma_max`` (radians), keyword arguments of
+    :func:`glsl_function` and :func:`numpy_port`.  Files without the two parameters are
+    read as the model reads them (``sqrtcos``, ``hold``)."""
+    normalisation = getattr(model, "normalisation", "sqrtcos")
+    extrapolation = getattr(model, "extrapolation", "hold")
+    if normalisation not in NORMALISATIONS or extrapolation not in EXTRAPOLATIONS:
+        raise KesbrdfError(
+            f"brdf-explorer export: expected normalisation in {', '.join(NORMALISATIONS)} and extrapolation in "
+            f"{', '.join(EXTRAPOLATIONS)}, got {str(normalisation)[:40]!r} and {str(extrapolation)[:40]!r}"
+        )
+    return {"normalisation": normalisation, "extrapolation": extrapolation, "gamma_max": float(model.gamma_max)}
+
+
+def _lobe_constants(normalisation: str, extrapolation: str):
+    """(λ, fade slope) of the baked shader: w = max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r))
+    with λ = 0 for ``sqrtcos``; fade = clamp(1 − (γ − γ_max)·slope, 0, 1) with slope 0 for
+    ``hold`` (exactly 1 everywhere)."""
+    if normalisation not in NORMALISATIONS:
+        raise KesbrdfError(f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}")
+    if extrapolation not in EXTRAPOLATIONS:
+        raise KesbrdfError(f"unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}")
+    lam = BOUNDED_LAMBDA if normalisation == "bounded" else 0.0
+    slope = 1.0 / math.radians(FADE_DEG) if extrapolation == "fade" else 0.0
+    return lam, slope
+
+
 def _body3(model):
     body = np.atleast_1d(np.asarray(model.body, float))
     return np.repeat(body, 3) if body.size == 1 else body[:3]
@@ -122,9 +154,14 @@ def _f(x: float) -> str:
     return f"{float(x):.8e}"
 
 
-def glsl_function(table, d_gamma: float, body) -> str:
-    """GLSL (the common subset of #version 410 and ES 3.00) of ``BRDF(L, V, N, X, Y)``."""
+def glsl_function(table, d_gamma: float, body, *, normalisation: str, extrapolation: str, gamma_max: float) -> str:
+    """GLSL (the common subset of #version 410 and ES 3.00) of ``BRDF(L, V, N, X, Y)``.
+
+    ``normalisation``, ``extrapolation`` and ``gamma_max`` are the model's
+    (:func:`lobe_parameters`).
+    """
     n_phi, n_gamma, _ = table.shape
+    lam, slope = _lobe_constants(normalisation, extrapolation)
     n = n_phi * n_gamma
 
     def array(c: int) -> str:
@@ -138,6 +175,11 @@ const int KES_NGAMMA = {n_gamma};
 const float KES_DGAMMA = {_f(d_gamma)};
 const float KES_TWO_PI = 6.283185307179586;
 const vec3 KES_BODY = vec3({b[0]}, {b[1]}, {b[2]});
+// foreshortening weight w = max(sqrt(cos_i cos_r), KES_LAMBDA * max(cos_i, cos_r)): normalisation "{normalisation}"
+const float KES_LAMBDA = {_f(lam)};
+// lobe factor clamp(1 - (gamma - KES_GAMMA_MAX) * KES_FADE_SLOPE, 0, 1): extrapolation "{extrapolation}"
+const float KES_GAMMA_MAX = {_f(gamma_max)};
+const float KES_FADE_SLOPE = {_f(slope)};
 // q(phi_i, gamma_j) of channel c at KES_Qc[i * KES_NGAMMA + j], phi_i = i*2pi/KES_NPHI, gamma_j = j*KES_DGAMMA
 {array(0)}
 {array(1)}
@@ -187,7 +229,9 @@ vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)
     // at the mirror direction the deviation has no azimuth: the plane of incidence
     if (length(s) < 1e-12) s = wr.xy - wi.xy;
     float phi = atan(s.y, s.x);
-    return scale * (KES_BODY * tint + kesLookup(phi, gam) / sqrt(wi.z * wr.z));
+    float w = max(sqrt(wi.z * wr.z), KES_LAMBDA * max(wi.z, wr.z));
+    float fade = clamp(1.0 - (gam - KES_GAMMA_MAX) * KES_FADE_SLOPE, 0.0, 1.0);
+    return scale * (KES_BODY * tint + kesLookup(phi, gam) * (fade / w));
 }}
 """
 
@@ -203,15 +247,20 @@ def brdf_explorer_source(model, n_phi: int | None = None, n_gamma: int | None = 
             f"brdf-explorer export: expected n_phi >= 4, n_gamma >= 2 and n_phi * n_gamma <= {MAX_TABLE_ENTRIES} "
             f"(GLSL constant-array limit), got {n_phi} x {n_gamma}"
         )
+    lobe = lobe_parameters(model)
     table, d_gamma = resample_table(model, n_phi, n_gamma)
     mapping = model.parameters.get("mapping", "deviation") if isinstance(getattr(model, "parameters", None), dict) else "deviation"
     halfvector = 1 if mapping == "halfvector" else 0
-    info = {"n_phi": n_phi, "n_gamma": n_gamma, "d_phi_deg": 360.0 / n_phi, "d_gamma_deg": math.degrees(d_gamma), "entries_per_channel": n_phi * n_gamma}
+    info = {
+        "n_phi": n_phi, "n_gamma": n_gamma, "d_phi_deg": 360.0 / n_phi, "d_gamma_deg": math.degrees(d_gamma),
+        "entries_per_channel": n_phi * n_gamma, "normalisation": lobe["normalisation"], "extrapolation": lobe["extrapolation"],
+    }
     text = f"""analytic
 
 # kesbrdf extended-KES fabric model, evaluated by its own table lookup (not a fit).
 # Table resampled to {n_phi} phi x {n_gamma} gamma ({info['d_phi_deg']:.3g} deg x {info['d_gamma_deg']:.3g} deg) from
 # {model.phi_grid.size} x {model.gamma_grid.size}; frame: X = warp, Y = weft, N = normal.
+# Foreshortening normalisation {lobe['normalisation']!r}, lobe beyond the last measured gamma: {lobe['extrapolation']!r}.
 # [type] [name] [min val] [max val] [default val]
 
 ::begin parameters
@@ -221,7 +270,7 @@ color tint 1 1 1
 ::end parameters
 
 ::begin shader
-{glsl_function(table, d_gamma, _body3(model))}
+{glsl_function(table, d_gamma, _body3(model), **lobe)}
 ::end shader
 """
     return text, info
@@ -245,7 +294,7 @@ def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, see
     ref = evaluate(model, wi, wr)
     if ref.shape[-1] == 1:
         ref = np.repeat(ref, 3, axis=-1)
-    approx = numpy_port(table, d_gamma, _body3(model), wi, wr)
+    approx = numpy_port(table, d_gamma, _body3(model), wi, wr, **lobe_parameters(model))
     rel = np.abs(approx - ref) / np.maximum(np.abs(ref), 1e-12)
     return {
         "median_rel": float(np.median(rel)),
@@ -256,9 +305,14 @@ def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, see
     }
 
 
-def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False):
-    """Line-by-line numpy port of :func:`glsl_function`'s ``BRDF`` (float64), shape (N, 3)."""
+def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False, *, normalisation: str, extrapolation: str, gamma_max: float):
+    """Line-by-line numpy port of :func:`glsl_function`'s ``BRDF`` (float64), shape (N, 3).
+
+    ``normalisation``, ``extrapolation`` and ``gamma_max`` are the model's
+    (:func:`lobe_parameters`).
+    """
     n_phi, n_gamma, _ = table.shape
+    lam, slope = _lobe_constants(normalisation, extrapolation)
     wi = np.asarray(wi, float)
     wr = np.asarray(wr, float)
     if halfvector:
@@ -286,7 +340,9 @@ def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False):
     a = table[i0, j0] * (1 - fv) + table[i0, j1] * fv
     b = table[i1, j0] * (1 - fv) + table[i1, j1] * fv
     q = a * (1 - fu) + b * fu
-    f = np.asarray(body) + q / np.sqrt(wi[..., 2] * wr[..., 2])[..., None]
+    w = np.maximum(np.sqrt(wi[..., 2] * wr[..., 2]), lam * np.maximum(wi[..., 2], wr[..., 2]))
+    fade = np.clip(1.0 - (gam - gamma_max) * slope, 0.0, 1.0)
+    f = np.asarray(body) + q * (fade / w)[..., None]
     above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
     return np.where(above[..., None], f, 0.0)
 

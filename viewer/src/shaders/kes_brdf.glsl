@@ -11,6 +11,11 @@ uniform int kesNGamma;
 uniform float kesDGamma;
 uniform vec3 kesBody;     // body term c in 1/sr (model's, or base_color/pi for a colourway)
 uniform int kesMapping;   // 0 deviation, 1 halfvector, 2 paper (eq. 3-4 literally)
+// The model file's parameters (docs/formats.md steps 2-3; model.ts KesModel):
+uniform float kesLambda;    // w = max(sqrt(cos_i cos_r), kesLambda*max(cos_i, cos_r)): 0.5 "bounded", 0 "sqrtcos"
+uniform float kesGammaMax;  // last gamma of the table, radians
+uniform float kesFadeSlope; // fade = clamp(1 - (gamma - kesGammaMax)*kesFadeSlope, 0, 1): 1/6deg "fade", 0 "hold"
+uniform float kesLineSum;   // theta_i + theta_r of the fitted incidence line, radians (paper mapping)
 
 const float KES_PI = 3.141592653589793;
 const float KES_TWO_PI = 6.283185307179586;
@@ -54,7 +59,26 @@ void kesPhiGamma(vec3 wi, vec3 wr, out float phi, out float gamma) {
   phi = atan(s.y, s.x);
 }
 
-// paper eq. 3-4 literally, as kesbrdf.brdf does it: rho_KES = q + body*sqrt(cos(gamma)/2)
+// Foreshortening weight w of f_r = c + fade*q/w (kesbrdf.mappings.foreshortening).
+float kesWeight(float cosI, float cosR) {
+  return max(sqrt(cosI * cosR), kesLambda * max(cosI, cosR));
+}
+
+// The lobe's factor beyond the last measured gamma (kesbrdf.mappings.fade); 1 for "hold".
+float kesFade(float gamma) {
+  return clamp(1.0 - (gamma - kesGammaMax) * kesFadeSlope, 0.0, 1.0);
+}
+
+// sqrt(cos_i cos_r) / w on the incidence line theta_i + theta_r = kesLineSum at |gamma|
+// (kesbrdf.mappings.line_foreshortening); 1 for "sqrtcos".
+float kesLineRatio(float g) {
+  if (kesLambda == 0.0) return 1.0;
+  float geo = sqrt(max((cos(g) + cos(kesLineSum)) / 2.0, 0.0));
+  float cosHi = cos(clamp((kesLineSum - g) / 2.0, 0.0, 0.5 * KES_PI));
+  return geo / max(geo, kesLambda * cosHi);
+}
+
+// paper eq. 3-4 literally, as kesbrdf.model does it: rho_KES = q*kesLineRatio + body*sqrt(cos(gamma)/2)
 // (the measured quantity on the theta_i + theta_r = 90 deg line), divided by
 // sqrt(cos theta_i cos theta_r) * sin(beta), sin(beta) clamped at KES_PAPER_MIN_SIN_BETA.
 const float KES_PAPER_MIN_SIN_BETA = 1e-6;
@@ -70,16 +94,16 @@ vec3 kesPaper(vec3 wi, vec3 wr) {
   float c = cos(thetaR);
   float sinHalfBeta = clamp(0.5 * sqrt(s * s + c * c), 0.0, 1.0);
   float sinBeta = max(sin(2.0 * asin(sinHalfBeta)), KES_PAPER_MIN_SIN_BETA);
-  vec3 rho = kesLookup(phi, abs(gamma)) + kesBody * sqrt(max(cos(gamma), 0.0) / 2.0);
+  vec3 rho = kesLookup(phi, abs(gamma)) * kesLineRatio(abs(gamma)) + kesBody * sqrt(max(cos(gamma), 0.0) / 2.0);
   return rho / (sqrt(wi.z * wr.z) * sinBeta);
 }
 
-// f_r in 1/sr per channel; zero at or below the horizon.
+// f_r = c + fade(gamma)*q/w in 1/sr per channel; zero at or below the horizon.
 vec3 kesBRDF(vec3 wi, vec3 wr) {
   if (wi.z <= 0.0 || wr.z <= 0.0) return vec3(0.0);
   if (kesMapping == 2) return kesPaper(wi, wr);
   float phi;
   float gamma;
   kesPhiGamma(wi, wr, phi, gamma);
-  return kesBody + kesLookup(phi, gamma) / sqrt(wi.z * wr.z);
+  return kesBody + kesLookup(phi, gamma) * (kesFade(gamma) / kesWeight(wi.z, wr.z));
 }
