@@ -4,10 +4,13 @@ The glTF export is imported by Blender's own glTF importer and rendered in Cycle
 (``bpy``, the ``blender`` extra); the image is compared with the kesbrdf Mitsuba
 plugin's render of the model in the same scene (sphere + folded cloth, studio soft
 boxes).  A frame error in the export, here the anisotropy direction turned by 90° in
-``KHR_materials_anisotropy.anisotropyRotation``, must fail the same bound: the bound is
-there to catch that class of error, not only to pass.
+``KHR_materials_anisotropy.anisotropyRotation``, must fail the bound the export passes:
+the bound is there to catch that class of error, not only to pass.  That bound is taken
+on the pixels where the direction shows (where the plugin's own render changes when the
+warp is turned), because over the whole frame the direction is lost among the diffuse
+areas and the fit's own error.
 
-Small images (128x96, 16 spp + OIDN) keep each render to a few seconds.
+Small images (128x96, 32 spp + OIDN) keep each render to a few seconds.
 """
 
 from __future__ import annotations
@@ -30,15 +33,26 @@ needs_bpy = pytest.mark.skipif(importlib.util.find_spec("bpy") is None, reason="
 #: Test renders: small and few samples, denoised on both sides.
 RESOLUTION = (128, 96)
 SPP = 32
-#: Mean FLIP of the glTF in Blender against the plugin, on the fabric pixels, for the
-#: Ward fabric of conftest.py (glTF fit NRMSE 0.17 on the tests' small grid).
-#: Measured: 0.152 as exported, 0.168 with the anisotropy turned by 90°; the noise floor
-#: (two plugin seeds) is 0.071.  Both renderers are seeded, so these numbers repeat on
-#: one machine.  The margin is small because Blender's glTF importer maps
-#: anisotropyStrength s straight onto the Principled "Anisotropic" input, which stretches
-#: the lobe far less than glTF's α_t = mix(α, 1, s²) (docs/exports.md): in Blender a 90°
-#: turn of this fabric's anisotropy moves FLIP by 10 % only.  The bound is the midpoint.
+#: Mean FLIP of the glTF in Blender against the plugin over all fabric pixels, for the
+#: Ward fabric of conftest.py (glTF fit NRMSE 0.17 on the tests' small grid): the frame
+#: agrees.  Measured 0.129-0.135 in five runs (noise floor, two plugin seeds, 0.070-0.074).
+#: This bound cannot see the anisotropy direction: turned by 90°, the frame measures
+#: 0.144-0.150, also inside it.  Over the whole frame the diffuse areas and the fit's own
+#: error dominate, and Blender's glTF importer maps anisotropyStrength s straight onto
+#: the Principled "Anisotropic" input, which stretches the lobe far less than glTF's
+#: α_t = mix(α, 1, s²) (docs/exports.md): the streaks are weak in Blender.
 GLTF_FLIP_BOUND = 0.160
+#: Mean FLIP on the pixels where the anisotropy direction shows
+#: (:func:`kesbrdf.export.looks.direction_mask`: the plugin's own render changes by more
+#: than FLIP 0.3 when the warp is turned by 90°; 209-239 of the 3462 fabric pixels).
+#: Measured in five runs: 0.221-0.249 as exported, 0.318-0.343 with the anisotropy
+#: turned by 90°, noise floor (two plugin seeds) 0.100-0.108 on these pixels.  The
+#: renders are seeded but not bit-identical from run to run (OIDN and thread order on
+#: both sides), hence ranges.  The bound is the midpoint of the worst cases, 0.034 from
+#: each (the means, 0.237 and 0.333, are 0.046 and 0.050 away).
+DIRECTION_FLIP_BOUND = 0.283
+#: The direction mask must hold enough pixels for a mean (measured 209-239).
+MIN_DIRECTION_PIXELS = 100
 #: Blender's render must be a render: fabric pixels lit, as bright as the plugin's to within
 #: a factor 2 on average (a missing light, a black material or a wrong exposure fails).
 MEAN_RATIO_RANGE = (0.5, 2.0)
@@ -75,19 +89,45 @@ def test_scene_is_the_same_in_both_renderers(setup):
 
 @needs_bpy
 def test_gltf_in_blender_matches_the_plugin_and_a_turned_anisotropy_does_not(setup):
+    """Issue 18: Blender's render of the imported glTF agrees with the plugin render within
+    a FLIP bound, on the fabric and on the pixels where the anisotropy direction shows;
+    the same material with anisotropyRotation + 90° fails the second bound."""
     from kesbrdf.export import looks
+    from kesbrdf.render.compare import compare_images
 
-    ref, d = setup["ref"], setup["dir"]
-    good = looks.compare_export(ref, "gltf", d / "fabric.gltf", setup["scene"], setup["opts"], d / "b0")
+    ref, d, scene, opts = setup["ref"], setup["dir"], setup["scene"], setup["opts"]
+    good = looks.compare_export(ref, "gltf", d / "fabric.gltf", scene, opts, d / "b0")
     turned = looks.compare_export(ref, "gltf", _turned(d / "fabric.gltf", d / "turned.gltf", 90.0),
-                                  setup["scene"], setup["opts"], d / "b1")
+                                  scene, opts, d / "b1")
     ratio = float(np.mean(good["_image"][ref.mask]) / np.mean(ref.image[ref.mask]))
     assert MEAN_RATIO_RANGE[0] < ratio < MEAN_RATIO_RANGE[1]
     assert good["flip"] < GLTF_FLIP_BOUND
-    assert turned["flip"] > GLTF_FLIP_BOUND
+
+    direction = looks.direction_mask(setup["model"], ref, scene, opts)
+    assert direction.sum() >= MIN_DIRECTION_PIXELS
+
+    def on_direction(img):
+        return compare_images(ref.image, img, direction, ref.exposure)["flip"]
+
+    floor, good_dir, turned_dir = on_direction(ref.second), on_direction(good["_image"]), on_direction(turned["_image"])
+    assert floor < good_dir < DIRECTION_FLIP_BOUND < turned_dir, (floor, good_dir, turned_dir)
     # the importer follows the UV map's tangent (the warp), not its radial default: the
     # export's constant anisotropyTexture is what makes it do so
     assert good["_info"]["principled"]["Tangent"].startswith("ShaderNodeTangent:UV_MAP:UVMap")
+
+
+def test_turned_warp_scene_turns_the_cloth_tangent_by_90_degrees():
+    """The direction mask's plugin render has u along the old weft: on the cloth u ran along
+    x (the edge u = 1 is one x); turned, the edge u' = 1 is one z and spans the width in x."""
+    from kesbrdf.export.looks import studio_scene, turned_warp_scene
+
+    sc = studio_scene((64, 48))
+    t = turned_warp_scene(sc)
+    p, n, uv, f = t["objects"]["cloth"]
+    edge = p[uv[:, 0] > 0.99]
+    assert np.ptp(edge[:, 2]) < 1e-9 and np.ptp(edge[:, 0]) == pytest.approx(1.0)
+    assert t["objects"]["cloth"][0] is sc["objects"]["cloth"][0] and t["lights"] == sc["lights"]
+    assert np.array_equal(t["objects"]["floor"][2], sc["objects"]["floor"][2])
 
 
 # -- no renders below: the mapping, the scene, the CLI and the report section ------------

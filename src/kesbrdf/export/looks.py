@@ -71,6 +71,8 @@ __all__ = [
     "check_look",
     "require_renderer",
     "PluginReference",
+    "turned_warp_scene",
+    "direction_mask",
     "compare_export",
     "check_looks",
     "look_line",
@@ -496,6 +498,8 @@ class PluginReference:
         t0 = time.perf_counter()
         self.image, self.mask = render_plugin(model_path, scene, opts, opts.seed, want_mask=True)
         second, _ = render_plugin(model_path, scene, opts, opts.seed + 1)
+        #: the second seed's render (the noise floor on any other mask)
+        self.second = second
         self.seconds = round(time.perf_counter() - t0, 2)
         self.exposure = auto_exposure(self.image, self.mask)
         noise = compare_images(self.image, second, self.mask, self.exposure)
@@ -503,14 +507,52 @@ class PluginReference:
         self.ref8 = noise["_ref8"]
 
 
-def compare_export(ref: PluginReference, fmt: str, path, scene: dict, opts: LookOptions, workdir) -> dict:
+def turned_warp_scene(scene: dict) -> dict:
+    """``scene`` with the fabric's warp turned by 90° in the surface: UVs (u, v) → (1 − v, u),
+    so ∂p/∂u' = −∂p/∂v (the weft) and the shading tangent the plugin builds from the UVs
+    follows the old weft; geometry, lights and camera unchanged."""
+    objects = dict(scene["objects"])
+    for name in scene["fabric"]:
+        p, n, uv, f = objects[name]
+        objects[name] = (p, n, np.stack([1.0 - uv[:, 1], uv[:, 0]], -1), f)
+    return {**scene, "objects": objects}
+
+
+#: Per-pixel FLIP (:func:`kesbrdf.render.compare.flip_mean`'s map) between the plugin
+#: render and the plugin render with the warp turned by 90° above which a fabric pixel
+#: counts as showing the anisotropy direction (:func:`direction_mask`).  Above the
+#: seed-to-seed noise: on the tests' Ward fabric (128 × 96, 32 spp + OIDN) the 99th
+#: percentile of the FLIP map between two plugin seeds is 0.20.
+DIRECTION_FLIP = 0.3
+
+
+def direction_mask(model_path, ref: PluginReference, scene: dict, opts: LookOptions,
+                   threshold: float = DIRECTION_FLIP) -> np.ndarray:
+    """(H, W) bool: the fabric pixels of ``ref`` whose plugin render changes by more than
+    FLIP ``threshold`` when the warp is turned by 90° (:func:`turned_warp_scene`).
+
+    These are the pixels where a renderer's anisotropy direction is visible at all (the
+    highlights' streaks); over the whole frame, diffuse areas and fit error dominate.  The
+    mask comes from the plugin alone (two of its renders), never from the export's image.
+    """
+    from kesbrdf.render.compare import flip_mean
+    from kesbrdf.render.scenes import to_srgb8
+
+    turned, _ = render_plugin(model_path, turned_warp_scene(scene), opts, opts.seed)
+    _, value, _ = flip_mean(to_srgb8(turned, ref.exposure), ref.ref8, ref.mask)
+    return ref.mask & (value > threshold)
+
+
+def compare_export(ref: PluginReference, fmt: str, path, scene: dict, opts: LookOptions, workdir,
+                   mask: np.ndarray | None = None) -> dict:
     """Render one export in its renderer and compare it with the plugin render ``ref``
     (:func:`kesbrdf.render.compare.compare_images`: ``flip``, ``rel_rmse``, 8-bit images, FLIP map)
-    plus ``_image`` (linear) and ``_info`` (renderer details)."""
+    plus ``_image`` (linear) and ``_info`` (renderer details).  ``mask`` (default the
+    fabric, ``ref.mask``) selects the pixels the numbers are taken over."""
     from kesbrdf.render.compare import compare_images
 
     img, info = render_export(fmt, path, scene, opts, workdir)
-    r = compare_images(ref.image, img, ref.mask, ref.exposure)
+    r = compare_images(ref.image, img, ref.mask if mask is None else mask, ref.exposure)
     r["_image"], r["_info"] = img, info
     return r
 
