@@ -36,7 +36,10 @@ Numbers (:func:`kesbrdf.render.compare.compare_images`, on the fabric pixels):
 its 99.5th-percentile fabric luminance shows at 0.9) and **relative RMSE** of the
 linear images, ‖E − P‖₂/‖P‖₂.  The **noise floor** is the same pair of numbers
 between two plugin renders with different seeds: an export at the floor looks like
-the model as far as this scene can tell.
+the model as far as this scene can tell.  :func:`direction_mask` narrows the fabric to
+the pixels where the anisotropy direction shows (the plugin render changes when the
+warp is turned by 90°); over the whole frame a wrong direction is lost among the diffuse
+areas and the fit error (``compare_export(..., mask=...)``).
 
 Blender runs in a subprocess (:mod:`kesbrdf.export.blender_look`); ``bpy`` is needed
 only there and only then (``pip install 'kesbrdf[blender]'``).
