@@ -63,8 +63,12 @@ ENERGY_BOUND = 0.95
 #: under a half turn of both directions about the normal).
 ENERGY_N_COS, ENERGY_N_PHI = 17, 12
 ENERGY_THETA_MAX_DEG = 89.99
-#: Albedo quadrature of the table (:func:`kesbrdf.diagnostics.grazing_albedo` nodes).
-ENERGY_QUAD = (32, 64)
+#: Albedo quadrature of the table (:func:`kesbrdf.diagnostics.grazing_albedo` nodes):
+#: g differs from (32, 64) nodes by < 6 % relative on the Sadeghi velvet fit, 4 s a table.
+ENERGY_QUAD = (24, 48)
+#: A first pass at (12, 24) nodes (1 s): below ENERGY_SKIP everywhere no table is made
+#: (the coarse albedo differs from the fine one by well under the 0.15 gap to the bound).
+ENERGY_SKIP_QUAD, ENERGY_SKIP = (12, 24), 0.8
 #: Rounds of (albedo table, residual refit): each round scales down what the last still
 #: lets exceed the bound.
 ENERGY_ROUNDS = 3
@@ -263,6 +267,9 @@ def _bound_energy(model: FibrePriorModel, m: Measurement) -> None:
     """Give ``model`` its energy scale g (module docstring), refitting the residual to the
     scaled prior after each round so the measured samples are still reproduced."""
     scale = None
+    if np.all(energy_scale_table(model.evaluate, ENERGY_SKIP, ENERGY_SKIP_QUAD) >= 1.0):
+        model.diagnostics["energy"] = "no scaling needed"
+        return
     for _ in range(ENERGY_ROUNDS):
         new = energy_scale_table(model.evaluate)
         if np.all(new >= 1.0):
@@ -283,13 +290,13 @@ def _energy_nodes():
     return theta, phi
 
 
-def energy_scale_table(brdf, bound: float = ENERGY_BOUND) -> np.ndarray:
+def energy_scale_table(brdf, bound: float = ENERGY_BOUND, quad=None) -> np.ndarray:
     """min(1, bound/a(ω)) at the energy-scale nodes (cos θ, φ), shape (n_cos, n_phi, C);
     a is the directional albedo of ``brdf`` (:func:`kesbrdf.diagnostics.grazing_albedo`)."""
     from kesbrdf.diagnostics import grazing_albedo
 
     theta, phi = _energy_nodes()
-    a = np.stack([grazing_albedo(brdf, theta, p, *ENERGY_QUAD) for p in phi], axis=1)  # (n_cos, n_phi, C)
+    a = np.stack([grazing_albedo(brdf, theta, p, *(quad or ENERGY_QUAD)) for p in phi], axis=1)  # (n_cos, n_phi, C)
     return np.minimum(1.0, bound / np.maximum(a, 1e-300))
 
 
