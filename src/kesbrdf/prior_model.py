@@ -14,16 +14,21 @@ r"""Model kind ``fibre-prior``: the woven-cloth prior times a KES-interpolated r
 * τ(γ) = 1 inside the measured γ range and falls smoothly (smoothstep) to 0 over
   :data:`RELAX_DEG` beyond it, so the residual relaxes to 1 where nothing was measured;
 * g(ω) is the energy scale (docs/decisions.md, "Grazing energy of the fibre prior"):
-  with a(ω) the directional albedo of f_prior·r^τ, g = min(1, :data:`ENERGY_BOUND`/a),
-  tabulated at fit time over (cos θ, φ mod 180°) (:func:`energy_scale_table`) and read
-  bilinearly (:func:`energy_scale`).  The model is
+  with a(θ) the largest directional albedo of f_prior·r^τ over light azimuths,
+  g = min(1, :data:`ENERGY_BOUND`/a), tabulated at fit time over cos θ
+  (:func:`energy_scale_table`; a few rounds, below) and read linearly
+  (:func:`energy_scale`, which also reads tables over (cos θ, φ mod 180°)).  The model is
 
   .. math:: f_r = g(\omega_i)\,g(\omega_r)\,f_\text{prior}\,r^{\tau}
 
   so its albedo a'(ω_i) = g(ω_i)∫g(ω_r) f cos θ_r dω_r ≤ g(ω_i)·a(ω_i) ≤ ENERGY_BOUND
   (up to the table's interpolation), and g(ω_i)g(ω_r) is symmetric: reciprocal.  The
-  residual is fitted to y/(g g f_prior), so measured samples are still reproduced.
-  Files without an ``energy`` table (written before) have g = 1.
+  residual is fitted to y/(g g f_prior), so measured samples are still reproduced; g
+  depends on θ alone, so on the incidence line at any orientation g(θ_i)g(θ_r) is the
+  factor the residual divided out at the measured ones (held-out orientations keep their
+  values).  The refit gives back part of each scaling, so g is built in up to
+  :data:`ENERGY_ROUNDS` rounds of (table, residual refit), each step raised to
+  :data:`ENERGY_RELAX`.  Files without an ``energy`` table (written before) have g = 1.
 
 With ``residual=False`` the model is the pure prior.  Every measured sample on the
 KES line with y above the noise floor is reproduced to round-off (the ratio is
@@ -59,8 +64,9 @@ RATIO_FLOOR = 1e-4
 #: the 11 reference families, benchmarks/bench_energy.py).
 ENERGY_BOUND = 0.95
 #: Energy-scale nodes: cos θ uniform in [0, 1] (the node at cos θ = 0 is evaluated at
-#: θ = ENERGY_THETA_MAX_DEG) and φ uniform over the half circle (the model is invariant
-#: under a half turn of both directions about the normal).
+#: θ = ENERGY_THETA_MAX_DEG); the albedo is maximised over light azimuths φ uniform over
+#: the half circle (the model is invariant under a half turn of both directions about
+#: the normal).
 ENERGY_N_COS, ENERGY_N_PHI = 17, 12
 ENERGY_THETA_MAX_DEG = 89.99
 #: Albedo quadrature of the table (:func:`kesbrdf.diagnostics.grazing_albedo` nodes):

@@ -21,7 +21,8 @@ precision):
   :data:`kesbrdf.prior_model.RELAX_DEG`'s smoothstep beyond the measured γ (or θ_h),
   as in :meth:`~kesbrdf.prior_model.FibrePriorModel.residual_ratio`.
 * g is the model's energy scale (:func:`kesbrdf.prior_model.energy_scale`): its table
-  over (cos θ, φ mod 180°) read bilinearly; 1 for files without one.
+  over cos θ (and φ mod 180° when it has more than one φ node) read (bi)linearly; 1
+  for files without one.
 
 Frames as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp (the family at
 α = 0); ``si.wi`` is the viewer ω_r, ``wo`` the light ω_i; two-sided mirroring, ``eval``,
