@@ -69,7 +69,7 @@ ENERGY_BOUND = 0.95
 #: the normal).
 ENERGY_N_COS, ENERGY_N_PHI = 17, 12
 ENERGY_THETA_MAX_DEG = 89.99
-#: Albedo quadrature of the table (:func:`kesbrdf.diagnostics.grazing_albedo` nodes):
+#: Albedo quadrature of the table (:func:`kesbrdf.geometry.grazing_albedo` nodes):
 #: g differs from (32, 64) nodes by < 6 % relative on the Sadeghi velvet fit, 4 s a table.
 ENERGY_QUAD = (24, 48)
 #: A first pass at (12, 24) nodes (1 s): below ENERGY_SKIP everywhere no table is made
@@ -303,9 +303,9 @@ def _energy_nodes():
 
 def energy_scale_table(brdf, bound: float = ENERGY_BOUND, quad=None) -> np.ndarray:
     """min(1, bound/max_φ a(θ, φ)) at the cos θ nodes, shape (n_cos, 1, C): a is the
-    directional albedo of ``brdf`` (:func:`kesbrdf.diagnostics.grazing_albedo`) at the
+    directional albedo of ``brdf`` (:func:`kesbrdf.geometry.grazing_albedo`) at the
     light azimuths φ of :data:`ENERGY_N_PHI` nodes over the half circle."""
-    from kesbrdf.diagnostics import grazing_albedo
+    from kesbrdf.geometry import grazing_albedo
 
     theta, phi = _energy_nodes()
     a = np.stack([grazing_albedo(brdf, theta, p, *(quad or ENERGY_QUAD)) for p in phi], axis=1)  # (n_cos, n_phi, C)
