@@ -14,6 +14,12 @@ for the reference.  ``bound`` is the model's own energy bound at any incidence,
 
 The "before" table of ``results.json`` was made by this module on the source tree
 before the fix (commit 27c3494, with this ``kesbrdf.diagnostics``); ``code`` says which.
+
+``fibre_prior_energy_scale`` (``python benchmarks/bench_energy.py --fibre-prior``, merged
+into ``results.json`` → ``energy`` by itself) is the ``fibre-prior`` column with and
+without the energy scale g of :mod:`kesbrdf.prior_model` (without = the fit as it was
+before it), and the held-out / hemisphere NRMSE of prior + residual
+(``benchmarks/bench_prior.py``'s :func:`evaluate_reference`) on a few families, both ways.
 """
 
 from __future__ import annotations
@@ -141,6 +147,71 @@ def plugin_sample_weights(families=("ward", "sadeghi-silk-crepe"), theta_r_deg=(
     return out
 
 
+def _kind_row(model, a_ref):
+    from kesbrdf.diagnostics import GRAZING_ANGLES_DEG
+
+    a = _albedo(model.evaluate)
+    a2 = _albedo(model.evaluate, 2 * N_S, 2 * N_PHI)
+    lo = np.asarray(GRAZING_ANGLES_DEG) <= 60
+    return {
+        "model": [round(float(v), 4) for v in a],
+        "reference": [round(float(v), 4) for v in a_ref],
+        "quad_err": float(f"{np.max(np.abs(a2 - a)):.2g}"),
+        "gain_model": round(float(a[~lo].max() / max(a[lo].max(), 1e-12)), 3),
+        "gain_reference": round(float(a_ref[~lo].max() / max(a_ref[lo].max(), 1e-12)), 3),
+        "bound": _json_bound(_bound(model)),
+        "above_one": bool(np.any(a > 1.0)),
+    }
+
+
+#: Families of the fibre-prior accuracy comparison: the two the scale changes most, one
+#: it barely touches, one it leaves alone.
+ACCURACY_FAMILIES = ("sadeghi-velvet", "sadeghi-silk-crepe", "ashikhmin-shirley", "ward")
+
+
+def fibre_prior_energy_scale() -> dict:
+    """The ``fibre-prior`` rows with and without the energy scale, and the NRMSE cost."""
+    import bench_prior
+
+    from kesbrdf import prior_model
+
+    real = prior_model._bound_energy
+    t0 = time.perf_counter()
+    rows = {"with": {}, "without": {}}
+    accuracy = {}
+    try:
+        for fam in FAMILIES:
+            try:
+                ref = _reference(fam)
+            except Exception as exc:  # an RGL file that is not installed
+                rows["with"][fam] = {"error": f"{type(exc).__name__}: {exc}"}
+                continue
+            a_ref = _albedo(ref)
+            for label, bound in (("without", lambda model, m: None), ("with", real)):
+                prior_model._bound_energy = bound
+                model = _fit(ref, "fibre-prior")
+                rows[label][f"{fam} / fibre-prior"] = row = _kind_row(model, a_ref)
+                if label == "with":
+                    row["energy"] = model.diagnostics.get("energy")
+                if fam in ACCURACY_FAMILIES:
+                    r = bench_prior.evaluate_reference(ref)
+                    accuracy.setdefault(fam, {})[label] = {
+                        k.replace("_prior_residual", ""): round(r[k], 4)
+                        for k in ("held_out_prior_residual", "hemi90_prior_residual", "hemi45_prior_residual")}
+                    accuracy[fam][label]["round_trip_max_rel"] = float(f"{r['round_trip_max_rel']:.2g}")
+    finally:
+        prior_model._bound_energy = real
+    return {
+        "what": "fibre-prior directional albedo (as 'rows') without the energy scale g (the fit before it) and "
+                "with it; nrmse: prior + residual, benchmarks/bench_prior.py evaluate_reference (paper protocol)",
+        "bound": prior_model.ENERGY_BOUND,
+        "rows": rows,
+        "max_model_albedo": {k: round(max(max(r["model"]) for r in v.values() if "model" in r), 4) for k, v in rows.items()},
+        "nrmse_prior_residual": accuracy,
+        "seconds": round(time.perf_counter() - t0, 1),
+    }
+
+
 def _json_bound(b):
     return None if b is None else ("unbounded" if math.isinf(b) else round(b, 4))
 
@@ -188,12 +259,37 @@ def run() -> dict:
         "rows": rows,
         "max_model_albedo": round(worst, 4),
         "seconds": round(time.perf_counter() - t0, 1),
+        "fibre_prior_energy_scale": fibre_prior_energy_scale(),
     }
+
+
+def merge_fibre_prior(path=None) -> dict:
+    """Rerun only :func:`fibre_prior_energy_scale` and merge it into ``results.json`` →
+    ``energy`` (its ``fibre-prior`` rows replaced by the new ones), written atomically."""
+    import json
+    import os
+    from pathlib import Path
+
+    path = Path(path or Path(__file__).resolve().parent / "results.json")
+    new = fibre_prior_energy_scale()
+    doc = json.loads(path.read_text())
+    energy = doc["benchmarks"]["energy"]
+    energy["fibre_prior_energy_scale"] = new
+    energy["rows"].update(new["rows"]["with"])
+    energy["max_model_albedo"] = round(max(max(r["model"]) for r in energy["rows"].values() if "model" in r), 4)
+    tmp = path.with_suffix(".part")
+    tmp.write_text(json.dumps(doc, indent=1, default=float) + "\n")
+    os.replace(tmp, path)
+    return new
 
 
 if __name__ == "__main__":
     import json
     import sys
 
-    json.dump(run(), sys.stdout, indent=1)
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parent))
+    if "--fibre-prior" in sys.argv:
+        json.dump(merge_fibre_prior(), sys.stdout, indent=1)
+    else:
+        json.dump(run(), sys.stdout, indent=1)
     print()

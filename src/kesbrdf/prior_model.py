@@ -12,7 +12,23 @@ r"""Model kind ``fibre-prior``: the woven-cloth prior times a KES-interpolated r
   back with :func:`kesbrdf.brdf.lookup` and divided by the line weight
   √((cos γ + cos S)/2), which the KES table carries);
 * τ(γ) = 1 inside the measured γ range and falls smoothly (smoothstep) to 0 over
-  :data:`RELAX_DEG` beyond it, so the residual relaxes to 1 where nothing was measured.
+  :data:`RELAX_DEG` beyond it, so the residual relaxes to 1 where nothing was measured;
+* g(ω) is the energy scale (docs/decisions.md, "Grazing energy of the fibre prior"):
+  with a(θ) the largest directional albedo of f_prior·r^τ over light azimuths,
+  g = min(1, :data:`ENERGY_BOUND`/a), tabulated at fit time over cos θ
+  (:func:`energy_scale_table`; a few rounds, below) and read linearly
+  (:func:`energy_scale`, which also reads tables over (cos θ, φ mod 180°)).  The model is
+
+  .. math:: f_r = g(\omega_i)\,g(\omega_r)\,f_\text{prior}\,r^{\tau}
+
+  so its albedo a'(ω_i) = g(ω_i)∫g(ω_r) f cos θ_r dω_r ≤ g(ω_i)·a(ω_i) ≤ ENERGY_BOUND
+  (up to the table's interpolation), and g(ω_i)g(ω_r) is symmetric: reciprocal.  The
+  residual is fitted to y/(g g f_prior), so measured samples are still reproduced; g
+  depends on θ alone, so on the incidence line at any orientation g(θ_i)g(θ_r) is the
+  factor the residual divided out at the measured ones (held-out orientations keep their
+  values).  The refit gives back part of each scaling, so g is built in up to
+  :data:`ENERGY_ROUNDS` rounds of (table, residual refit), each step raised to
+  :data:`ENERGY_RELAX`.  Files without an ``energy`` table (written before) have g = 1.
 
 With ``residual=False`` the model is the pure prior.  Every measured sample on the
 KES line with y above the noise floor is reproduced to round-off (the ratio is
@@ -37,12 +53,35 @@ from kesbrdf.measurement import Measurement
 from kesbrdf.model import line_weight, lookup
 from kesbrdf.prior import FibrePrior, fit_prior, fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "RELAX_DEG", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
+__all__ = ["FibrePriorModel", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
 #: Relative floor of the measured values before the ratio is taken.
 RATIO_FLOOR = 1e-4
+#: Largest directional albedo the energy scale g allows (module docstring): 1 less a
+#: margin for the bilinear interpolation of g between its nodes (measured below 0.03 on
+#: the 11 reference families, benchmarks/bench_energy.py).
+ENERGY_BOUND = 0.95
+#: Energy-scale nodes: cos θ uniform in [0, 1] (the node at cos θ = 0 is evaluated at
+#: θ = ENERGY_THETA_MAX_DEG); the albedo is maximised over light azimuths φ uniform over
+#: the half circle (the model is invariant under a half turn of both directions about
+#: the normal).
+ENERGY_N_COS, ENERGY_N_PHI = 17, 12
+ENERGY_THETA_MAX_DEG = 89.99
+#: Albedo quadrature of the table (:func:`kesbrdf.geometry.grazing_albedo` nodes):
+#: g differs from (32, 64) nodes by < 6 % relative on the Sadeghi velvet fit, 4 s a table.
+ENERGY_QUAD = (24, 48)
+#: A first pass at (12, 24) nodes (1 s): below ENERGY_SKIP everywhere no table is made
+#: (the coarse albedo differs from the fine one by well under the 0.15 gap to the bound).
+ENERGY_SKIP_QUAD, ENERGY_SKIP = (12, 24), 0.8
+#: Rounds of (albedo table, residual refit): each round scales down what the last still
+#: lets exceed the bound.
+ENERGY_ROUNDS = 4
+#: Exponent of each round's scale: the refitted residual restores the measured samples and
+#: with them about half of the scaling (velvet: 8.5, 1.32, 1.10, 1.02 × the bound in
+#: successive rounds with exponent 1), so each step is squared to converge in two or three.
+ENERGY_RELAX = 2.0
 
 
 @register
@@ -54,8 +93,11 @@ class FibrePriorModel(ReflectanceModel):
     fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
 
     def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
-                 diagnostics=None, input_info=None, kes=None, support=None):
+                 diagnostics=None, input_info=None, kes=None, support=None, energy=None):
         self.prior = prior
+        #: Energy scale g over (cos θ, φ): SimpleNamespace(scale (n_cos, n_phi, C)), or
+        #: None (g = 1, files written before it).
+        self.energy = energy
         self.residual = residual  # SimpleNamespace(phi_grid, gamma_grid, table, line_sum, gamma_max) or None
         #: The KES table (``kes`` or ``kes-halfdiff`` kind) fitted to the same samples:
         #: the third candidate of the σ model term (docs/prior.md §5), or None.
@@ -99,7 +141,16 @@ class FibrePriorModel(ReflectanceModel):
         f = self.prior(wi, wr)
         if self.residual is not None:
             f = f * self.residual_ratio(wi, wr)
+        if self.energy is not None:
+            f = f * energy_scale(self.energy, wi) * energy_scale(self.energy, wr)
         return np.where(np.isfinite(f), f, 0.0)
+
+    def scaled_prior(self, wi, wr) -> np.ndarray:
+        """g(ωi)·g(ωr)·f_prior: the prior the residual is a ratio to."""
+        f = self.prior(wi, wr)
+        if self.energy is not None:
+            f = f * energy_scale(self.energy, wi) * energy_scale(self.energy, wr)
+        return f
 
     def __call__(self, wi, wr):
         return self.evaluate(wi, wr)
@@ -126,6 +177,10 @@ class FibrePriorModel(ReflectanceModel):
             fields["kes_candidate"] = doc
         if self.support is not None:
             fields["support"] = self.support
+        if self.energy is not None:
+            fields["energy"] = {"bound": float(self.energy.bound), "cos_nodes": int(self.energy.scale.shape[0]),
+                                "phi_nodes": int(self.energy.scale.shape[1])}
+            arrays["energy_scale"] = self.energy.scale
         return fields, arrays
 
     @classmethod
@@ -167,6 +222,14 @@ class FibrePriorModel(ReflectanceModel):
                                                                     + [support["gamma_max_deg"]] + support["psi_deg"])):
                     raise ModelError(f"{source or 'model'}: support: expected finite theta_d_deg [lo, hi], gamma_max_deg "
                                      f"and psi_deg, got {fields['support']!r}")
+            energy = None
+            if fields.get("energy") is not None:
+                scale = np.asarray(arrays["energy_scale"], float)
+                if scale.ndim != 3 or scale.shape[0] < 2 or scale.shape[1] < 1 or not np.all(np.isfinite(scale)) \
+                        or np.any(scale < 0) or np.any(scale > 1):
+                    raise ModelError(f"{source or 'model'}: energy_scale: expected a (cos, phi, channel) table of "
+                                     f"values in [0, 1], got shape {scale.shape}")
+                energy = SimpleNamespace(scale=scale, bound=float(fields["energy"]["bound"]))
         except ModelError:  # already names the file and the field (ModelError is a ValueError)
             raise
         except (KeyError, TypeError, ValueError, MeasurementError) as exc:
@@ -177,7 +240,8 @@ class FibrePriorModel(ReflectanceModel):
                 "file written before the KES candidate and the measured support were stored: sigma = fit + spread "
                 "to the pure prior + theta_d law only (overconfident off the measured slice, docs/prior.md section 5)")
         return cls(prior, residual, channels=shared.get("channels", ("value",)), parameters=shared.get("parameters"),
-                   diagnostics=diagnostics, input_info=shared.get("input_info"), kes=kes, support=support)
+                   diagnostics=diagnostics, input_info=shared.get("input_info"), kes=kes, support=support,
+                   energy=energy)
 
     # -- fitting ------------------------------------------------------------------
     @classmethod
@@ -204,12 +268,71 @@ class FibrePriorModel(ReflectanceModel):
                     raise
                 note = f"no residual: {exc}"
         kes, kes_note = _fit_kes_candidate(m.subset(rows))
-        return cls(prior, residual, channels=m.channels, kes=kes, support=measured_support(m.subset(rows)),
-                   parameters={"residual": residual is not None, "prior": prior.report.get("chosen"),
-                               "theta_d_law": f"Fresnel eta={1.5} normalised at 45 deg"
-                               + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else "")},
-                   diagnostics={"fit": prior.report, "residual": note, "kes_candidate": kes_note},
-                   input_info=m.input_info())
+        model = cls(prior, residual, channels=m.channels, kes=kes, support=measured_support(m.subset(rows)),
+                    parameters={"residual": residual is not None, "prior": prior.report.get("chosen"),
+                                "theta_d_law": f"Fresnel eta={1.5} normalised at 45 deg"
+                                + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else ""),
+                                "energy": f"albedo-scaled, bound {ENERGY_BOUND}"},
+                    diagnostics={"fit": prior.report, "residual": note, "kes_candidate": kes_note},
+                    input_info=m.input_info())
+        _bound_energy(model, m.subset(rows))
+        return model
+
+
+def _bound_energy(model: FibrePriorModel, m: Measurement) -> None:
+    """Give ``model`` its energy scale g (module docstring), refitting the residual to the
+    scaled prior after each round so the measured samples are still reproduced."""
+    scale = None
+    if np.all(energy_scale_table(model.evaluate, ENERGY_SKIP, ENERGY_SKIP_QUAD) >= 1.0):
+        model.diagnostics["energy"] = "no scaling needed"
+        return
+    for _ in range(ENERGY_ROUNDS):
+        new = energy_scale_table(model.evaluate)
+        if np.all(new >= 1.0):
+            break
+        new = new ** ENERGY_RELAX  # over-relaxed: the residual refit gives back part of each step
+        scale = new if scale is None else scale * new
+        model.energy = SimpleNamespace(scale=scale, bound=ENERGY_BOUND)
+        if model.residual is not None:
+            model.residual = _fit_residual(model.scaled_prior, m)
+    model.diagnostics["energy"] = ("no scaling needed" if scale is None else
+                                   f"smallest energy scale g = {float(np.min(scale)):.3g}")
+
+
+def _energy_nodes():
+    mu = np.linspace(0.0, 1.0, ENERGY_N_COS)
+    theta = np.degrees(np.arccos(mu))
+    theta[0] = ENERGY_THETA_MAX_DEG
+    phi = np.arange(ENERGY_N_PHI) * (180.0 / ENERGY_N_PHI)
+    return theta, phi
+
+
+def energy_scale_table(brdf, bound: float = ENERGY_BOUND, quad=None) -> np.ndarray:
+    """min(1, bound/max_φ a(θ, φ)) at the cos θ nodes, shape (n_cos, 1, C): a is the
+    directional albedo of ``brdf`` (:func:`kesbrdf.geometry.grazing_albedo`) at the
+    light azimuths φ of :data:`ENERGY_N_PHI` nodes over the half circle."""
+    from kesbrdf.geometry import grazing_albedo
+
+    theta, phi = _energy_nodes()
+    a = np.stack([grazing_albedo(brdf, theta, p, *(quad or ENERGY_QUAD)) for p in phi], axis=1)  # (n_cos, n_phi, C)
+    return np.minimum(1.0, bound / np.maximum(a.max(axis=1, keepdims=True), 1e-300))
+
+
+def energy_scale(energy, w) -> np.ndarray:
+    """g(ω) of :func:`energy_scale_table`, bilinear in (cos θ, φ mod 180°), shape (..., C)."""
+    scale = energy.scale
+    n_mu, n_phi = scale.shape[:2]
+    w = np.asarray(w, float)
+    mu = np.clip(w[..., 2] / np.maximum(np.linalg.norm(w, axis=-1), 1e-300), 0.0, 1.0) * (n_mu - 1)
+    i0 = np.minimum(np.floor(mu).astype(int), n_mu - 2)
+    tm = (mu - i0)[..., None]
+    ph = (np.arctan2(w[..., 1], w[..., 0]) % np.pi) * (n_phi / np.pi)
+    j0 = np.floor(ph).astype(int) % n_phi
+    j1 = (j0 + 1) % n_phi
+    tp = (ph - np.floor(ph))[..., None]
+    lo = scale[i0, j0] * (1 - tp) + scale[i0, j1] * tp
+    hi = scale[i0 + 1, j0] * (1 - tp) + scale[i0 + 1, j1] * tp
+    return lo * (1 - tm) + hi * tm
 
 
 def _fit_kes_candidate(m: Measurement):

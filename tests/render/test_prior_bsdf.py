@@ -56,6 +56,15 @@ def prior_files(tmp_path_factory):
     }
     first = models["paper-filament"]
     models["pure-prior"] = FibrePriorModel(first.prior, None, channels=first.channels)
+    # the satin fits need no energy scale (albedo < 0.95): hand-set tables of g in
+    # [0.2, 1] with different values per channel exercise the plugin's lookup, over
+    # cos θ as fits write it and over (cos θ, φ) as energy_scale also reads
+    from types import SimpleNamespace
+
+    for name, shape in (("energy-scaled", (17, 1, 3)), ("energy-scaled-phi", (17, 12, 3))):
+        scale = np.random.default_rng(3).uniform(0.2, 1.0, shape)
+        models[name] = FibrePriorModel(first.prior, first.residual, channels=first.channels,
+                                       energy=SimpleNamespace(scale=scale, bound=0.95))
     folder = tmp_path_factory.mktemp("prior")
     out = {}
     for name, model in models.items():
@@ -81,7 +90,8 @@ def _load(path, **kw):
 
 
 
-@pytest.mark.parametrize("name", ["paper-filament", "paper-staple", "dense-staple", "pure-prior"])
+@pytest.mark.parametrize("name", ["paper-filament", "paper-staple", "dense-staple", "pure-prior", "energy-scaled",
+                                  "energy-scaled-phi"])
 def test_eval_agrees_with_numpy(render_module, prior_files, rng, name):
     path, model = prior_files[name]
     assert model.prior.spec.kinds == {"paper-staple": ("staple", "filament"),
@@ -95,7 +105,7 @@ def test_eval_agrees_with_numpy(render_module, prior_files, rng, name):
     assert not (err > tol).any(), (name, float(np.max(err / np.maximum(np.abs(want), 1e-30))))
 
 
-@pytest.mark.parametrize("name", ["paper-filament", "dense-staple"])
+@pytest.mark.parametrize("name", ["paper-filament", "dense-staple", "energy-scaled", "energy-scaled-phi"])
 def test_reciprocal(render_module, prior_files, rng, name):
     wi, wr = _pairs(rng, 2000)
     bsdf = _load(prior_files[name][0])

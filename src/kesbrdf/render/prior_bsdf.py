@@ -5,7 +5,7 @@ precision):
 
 .. math::
 
-    f_r(\omega_i, \omega_r) = f_\text{prior}(\omega_i, \omega_r)\cdot r(\omega_i, \omega_r)^{\tau}
+    f_r(\omega_i, \omega_r) = g(\omega_i)\,g(\omega_r)\,f_\text{prior}(\omega_i, \omega_r)\cdot r(\omega_i, \omega_r)^{\tau}
 
 * :math:`f_\text{prior} = k_d + \Phi(\theta_d)\sum_j k_{s,j} S_j` as
   :func:`kesbrdf.prior.evaluate_batch` (docs/prior.md): a filament family in closed form
@@ -20,6 +20,9 @@ precision):
   over (φ_h, θ_h, θ_d) for a dense fit.  The relaxation τ is
   :data:`kesbrdf.prior_model.RELAX_DEG`'s smoothstep beyond the measured γ (or θ_h),
   as in :meth:`~kesbrdf.prior_model.FibrePriorModel.residual_ratio`.
+* g is the model's energy scale (:func:`kesbrdf.prior_model.energy_scale`): its table
+  over cos θ (and φ mod 180° when it has more than one φ node) read (bi)linearly; 1
+  for files without one.
 
 Frames as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp (the family at
 α = 0); ``si.wi`` is the viewer ω_r, ``wo`` the light ω_i; two-sided mirroring, ``eval``,
@@ -277,6 +280,35 @@ class _Residual:
         return dr.exp(tau * dr.log(dr.maximum(r, 1e-30)))
 
 
+class _EnergyScale:
+    """g(ω) of :func:`kesbrdf.prior_model.energy_scale` in Dr.Jit: bilinear over uniform
+    cos θ nodes and φ nodes on the half circle (periodic)."""
+
+    def __init__(self, energy):
+        scale = _rgb(np.asarray(energy.scale, float))  # (n_mu, n_phi, 3)
+        self.n_mu, self.n_phi = scale.shape[:2]
+        self.table = [mi.Float(np.ascontiguousarray(scale[..., c]).ravel()) for c in range(3)]
+
+    def __call__(self, w):
+        mu = dr.clip(w.z, 0.0, 1.0) * (self.n_mu - 1)
+        i0 = dr.minimum(mi.UInt32(dr.floor(mu)), self.n_mu - 2)
+        tm = mu - mi.Float(i0)
+        ph = dr.atan2(w.y, w.x)
+        ph = dr.select(ph < 0.0, ph + math.pi, ph)
+        ph = dr.select(ph >= math.pi, ph - math.pi, ph) * (self.n_phi / math.pi)
+        j0f = dr.floor(ph)
+        tp = ph - j0f
+        j0 = mi.UInt32(j0f) % self.n_phi
+        j1 = (j0 + 1) % self.n_phi
+        out = []
+        for t in self.table:
+            g = lambda i, j: dr.gather(mi.Float, t, i * self.n_phi + j)  # noqa: E731
+            lo = g(i0, j0) * (1.0 - tp) + g(i0, j1) * tp
+            hi = g(i0 + 1, j0) * (1.0 - tp) + g(i0 + 1, j1) * tp
+            out.append(lo * (1.0 - tm) + hi * tm)
+        return mi.Color3f(*out)
+
+
 class FibrePriorBSDF(FabricBSDF):
     """Mitsuba BSDF of a ``fibre-prior`` model (module docstring)."""
 
@@ -301,6 +333,7 @@ class FibrePriorBSDF(FabricBSDF):
 
         self.prior = _Prior(model.prior)
         self.residual = None if model.residual is None else _Residual(model.residual)
+        self.energy = None if getattr(model, "energy", None) is None else _EnergyScale(model.energy)
         kd = self.prior.kd
         tint = parse_rgb(_prop(props, "lobe_tint", "1,1,1"), "lobe_tint")
         base = _prop(props, "base_color")
@@ -321,10 +354,12 @@ class FibrePriorBSDF(FabricBSDF):
         self._set_flags()
 
     def f_model(self, wi, wr):
-        """The model's f_r = f_prior · r^τ (Color3f) for unit directions above the horizon."""
+        """The model's f_r = g(ω_i) g(ω_r) f_prior · r^τ (Color3f) for unit directions above the horizon."""
         f = self.prior(wi, wr)
         if self.residual is not None:
             f = f * self.residual(wi, wr)
+        if self.energy is not None:
+            f = f * self.energy(wi) * self.energy(wr)
         return f
 
     def f_r(self, wi, wr, active=True):
