@@ -35,7 +35,7 @@ from typing import Iterator
 from kesbrdf.errors import OutputError
 
 __all__ = ["atomic_path", "write_text", "write_bytes", "remove_stale", "fsync_file", "fsync_dir",
-           "output_error", "describe", "STALE_LEGACY_SECONDS"]
+           "output_error", "describe", "name_max", "STALE_LEGACY_SECONDS"]
 
 #: Temporaries in the older naming (no process id: ``.<name>.<random>.part`` and the
 #: animation encoder's ``.<stem>.partial<ext>``) are removed once they are this old.
@@ -65,7 +65,7 @@ _CAUSES = {
 }
 
 
-def _name_max(folder: Path) -> int:
+def name_max(folder: Path) -> int:
     """Longest file name (bytes) in ``folder``'s nearest existing ancestor's file system."""
     for parent in (folder, *folder.parents):
         try:
@@ -80,7 +80,7 @@ def describe(exc: OSError, path: str | os.PathLike) -> str:
     path = Path(path)
     code = exc.errno
     if code == errno.ENAMETOOLONG:
-        limit = _name_max(path.parent)
+        limit = name_max(path.parent)
         longest = max(path.parts, key=lambda p: len(os.fsencode(p)))
         n = len(os.fsencode(longest))
         if n > limit:
@@ -237,7 +237,7 @@ def atomic_path(path: str | os.PathLike, keep_suffix: bool = False) -> Iterator[
     """
     path = Path(path)
     try:
-        if len(os.fsencode(path.name)) > _name_max(path.parent):  # before any content is written
+        if len(os.fsencode(path.name)) > name_max(path.parent):  # before any content is written
             raise OSError(errno.ENAMETOOLONG, os.strerror(errno.ENAMETOOLONG), str(path))
         is_dir = path.is_dir()
         created = [p for p in (path.parent, *path.parent.parents) if not p.exists()]  # deepest first

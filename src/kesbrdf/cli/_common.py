@@ -54,11 +54,11 @@ def check_output(path, suffixes: tuple[str, ...] = (), flag: str = "-o", folder:
     import os
     from pathlib import Path
 
-    from kesbrdf._atomic import _name_max
+    from kesbrdf._atomic import name_max
 
     out = Path(path)
     holder = out.parent
-    limit = _name_max(holder)
+    limit = name_max(holder)
     for part in out.parts:
         n = len(os.fsencode(part))
         if n > limit:
