@@ -283,10 +283,11 @@ def _render_mitsuba(scene: dict, fabric_bsdf: dict, opts: LookOptions, seed: int
     return arr[..., :3], mask
 
 
-#: The plugin's lobe beyond the last measured deviation for the reference render: "hold",
-#: the model as :func:`kesbrdf.brdf.evaluate` gives it and as every export encodes it
-#: (``kesbrdf render`` fades it by default, a rendering choice no export carries).
-REFERENCE_EXTRAPOLATION = "hold"
+#: The plugin's lobe beyond the last measured deviation for the reference render: None,
+#: the model file's own setting, i.e. the model as :func:`kesbrdf.brdf.evaluate` gives it
+#: and as every export encodes it (``kesbrdf render`` may override it; no export carries
+#: an override).
+REFERENCE_EXTRAPOLATION = None
 
 
 def render_plugin(model_path, scene: dict, opts: LookOptions, seed: int | None = None, want_mask: bool = False):

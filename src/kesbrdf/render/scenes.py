@@ -93,8 +93,9 @@ class RenderOptions:
     exposure: float = 0.0
     floor: bool = True
     #: lobe beyond the last measured deviation (kesbrdf plugin ``extrapolation``):
-    #: renders fade it (measured closer to the reference satins, docs/rendering.md)
-    extrapolation: str = "fade"
+    #: renders fade it (measured closer to the reference satins, docs/rendering.md);
+    #: None leaves the model file's own setting
+    extrapolation: str | None = "fade"
     tonemap: str = "clip"
     denoise: bool = False
     integrator: dict | None = field(default=None, repr=False)
@@ -212,7 +213,8 @@ def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
     elif opts.mapping != "deviation":  # never ignore an option silently
         raise KesbrdfError(f"mapping {opts.mapping!r} applies to kes models only; a {kind} model has its own "
                            "parametrisation (drop --mapping)")
-    if kind != "fibre-prior" or opts.extrapolation != "hold":  # the plugins' default is the model's own
+    if opts.extrapolation is not None and (kind != "fibre-prior" or opts.extrapolation != "hold"):
+        # the plugins' default is the model's own
         d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
         d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
