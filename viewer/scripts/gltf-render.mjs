@@ -7,46 +7,16 @@
 // OUT.json: {"material": {...GLTFLoader's MeshPhysicalMaterial fields}, "rel_rmse", "pixels",
 //            "mean_gltf", "mean_kes", "gltf": [...], "kes": [...]}  (images: linear RGB, row-major)
 import fs from 'node:fs';
-import os from 'node:os';
 import path from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
-
-const HERE = path.dirname(fileURLToPath(import.meta.url));
-const VIEWER = path.resolve(HERE, '..');
-const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
-const FLAGS = ['--no-sandbox', '--disable-background-networking', '--disable-component-update',
-  '--disable-sync', '--no-first-run', '--enable-unsafe-swiftshader', '--use-angle=swiftshader'];
-const ORIGIN = 'http://kesbrdf.invalid';
+import { VIEWER, openThreePage } from './three-page.mjs';
 
 const [inPath, outPath] = process.argv.slice(2);
 const input = JSON.parse(fs.readFileSync(inPath, 'utf-8'));
 const glbPaths = input.glbs ?? [input.glb];
 const kesGlsl = fs.readFileSync(path.join(VIEWER, 'src', 'shaders', 'kes_brdf.glsl'), 'utf-8');
 
-const PAGE = `<!doctype html><html><head><script type="importmap">
-{"imports": {"three": "${ORIGIN}/three/build/three.module.js", "three/addons/": "${ORIGIN}/three/examples/jsm/"}}
-</script></head><body><script type="module">
-import * as THREE from 'three';
-import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
-window.__three = THREE; window.__GLTFLoader = GLTFLoader; window.__ready = true;
-</script></body></html>`;
-
-const profile = fs.mkdtempSync(path.join(os.tmpdir(), 'kesbrdf-gltf-'));
-const ctx = await chromium.launchPersistentContext(profile, { executablePath: CHROMIUM, headless: true, args: FLAGS });
+const { page, errors, close } = await openThreePage();
 try {
-  const page = ctx.pages()[0] ?? (await ctx.newPage());
-  const errors = [];
-  page.on('pageerror', (e) => errors.push(String(e)));
-  await page.route(`${ORIGIN}/**`, (route) => {
-    const url = new URL(route.request().url());
-    if (url.pathname === '/') return route.fulfill({ contentType: 'text/html', body: PAGE });
-    const file = path.join(VIEWER, 'node_modules', url.pathname);
-    if (!file.startsWith(path.join(VIEWER, 'node_modules')) || !fs.existsSync(file)) return route.fulfill({ status: 404, body: '' });
-    return route.fulfill({ contentType: 'text/javascript', body: fs.readFileSync(file) });
-  });
-  await page.goto(`${ORIGIN}/`);
-  await page.waitForFunction(() => window.__ready === true, null, { timeout: 60000 });
   const results = [];
   for (const glbPath of glbPaths) {
   const glb = fs.readFileSync(glbPath).toString('base64');
@@ -157,6 +127,5 @@ try {
   if (errors.length) throw new Error(errors.join('\n'));
   fs.writeFileSync(outPath, JSON.stringify(input.glbs ? { results } : results[0]));
 } finally {
-  await ctx.close();
-  fs.rmSync(profile, { recursive: true, force: true });
+  await close();
 }

@@ -16,6 +16,9 @@ format          renderer (what reads the file)
 ``mtlx``        Blender Cycles, Principled BSDF with the ``open_pbr_surface`` inputs
                 read from the ``.mtlx`` (Blender 4.5 imports no MaterialX; mapping in
                 :func:`openpbr_to_principled`)
+``gltf-threejs`` the glTF/glb in three.js: ``MeshPhysicalMaterial`` from its
+                ``GLTFLoader``, WebGL in headless Chromium (:func:`threejs_render`;
+                direct light only, soft boxes as grids of point lights)
 ==============  =================================================================
 
 Scene (:func:`studio_scene`, y-up, metres): a UV sphere (warp along the parallels)
@@ -42,7 +45,9 @@ warp is turned by 90°); over the whole frame a wrong direction is lost among th
 areas and the fit error (``compare_export(..., mask=...)``).
 
 Blender runs in a subprocess (:mod:`kesbrdf.export.blender_look`); ``bpy`` is needed
-only there and only then (``pip install 'kesbrdf[blender]'``).
+only there and only then (``pip install 'kesbrdf[blender]'``).  three.js runs in
+headless Chromium through node (``viewer/scripts/gltf-look.mjs``, the viewer's npm
+packages); without chromium or ``viewer/node_modules`` its row is skipped.
 """
 
 from __future__ import annotations
@@ -51,6 +56,7 @@ import importlib.util
 import json
 import math
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -69,6 +75,9 @@ __all__ = [
     "render_plugin",
     "render_export",
     "blender_render",
+    "threejs_render",
+    "threejs_lights",
+    "RendererMissing",
     "openpbr_to_principled",
     "read_openpbr",
     "check_look",
@@ -89,6 +98,7 @@ RENDERERS = {
     "glb": "Blender Cycles (glTF importer)",
     "usd": "Blender Cycles (USD importer, UsdPreviewSurface)",
     "mtlx": "Blender Cycles (Principled BSDF from the .mtlx open_pbr_surface)",
+    "gltf-threejs": "three.js MeshPhysicalMaterial (GLTFLoader, headless Chromium)",
 }
 #: Longest light path (segments, Mitsuba's ``max_depth``): direct light and two bounces.
 MAX_DEPTH = 4
@@ -300,18 +310,24 @@ def render_plugin(model_path, scene: dict, opts: LookOptions, seed: int | None =
 
 
 # -- Blender ---------------------------------------------------------------------------------
+class RendererMissing(ExportError):
+    """The renderer of a look row is not installed (the row is skipped, the demo goes on)."""
+
+
 def require_renderer(fmt: str) -> None:
     """A one-line :class:`ExportError` when ``fmt`` has no renderer here or its renderer
     is not installed (checked before any export work)."""
     if fmt not in RENDERERS:
         raise ExportError(f"--check-look: expected a format with a renderer ({', '.join(RENDERERS)}), got {fmt!r}")
-    if fmt != "rgl-bsdf":
+    if fmt == "gltf-threejs":
+        _require_threejs()
+    elif fmt != "rgl-bsdf":
         _require_bpy()
 
 
 def _require_bpy() -> None:
     if importlib.util.find_spec("bpy") is None:
-        raise ExportError("the look check in Blender needs the 'bpy' module (Blender 4.5 as a Python module): "
+        raise RendererMissing("the look check in Blender needs the 'bpy' module (Blender 4.5 as a Python module): "
                           "pip install 'kesbrdf[blender]'")
 
 
@@ -458,12 +474,132 @@ def render_export(fmt: str, path, scene: dict, opts: LookOptions, workdir) -> tu
         t0 = time.perf_counter()
         img, _ = _render_mitsuba(scene, bsdf, opts, opts.seed + 1)
         return img, {"seconds": round(time.perf_counter() - t0, 2)}
+    if fmt == "gltf-threejs":
+        return threejs_render(scene, path, opts, workdir)
     if fmt in ("gltf", "glb"):
         return blender_render(scene, {"source": "gltf", "path": str(path.resolve())}, opts, workdir)
     if fmt == "usd":
         return blender_render(scene, {"source": "usd", "path": str(path.resolve())}, opts, workdir)
     inputs = openpbr_to_principled(read_openpbr(path))
     return blender_render(scene, {"source": "principled", "inputs": inputs, "uv_tangent": True}, opts, workdir)
+
+
+# -- three.js -------------------------------------------------------------------------------
+#: The viewer's folder (its npm packages hold three.js and playwright-core).
+VIEWER = Path(__file__).resolve().parents[3] / "viewer"
+#: Point lights per side of each soft box in three.js (n² per box): three.js's
+#: RectAreaLight shades with an isotropic LTC lobe and no sheen, so the soft boxes become
+#: grids of point lights, which shade with the full MeshPhysicalMaterial.
+THREEJS_GRID = 4
+#: Samples per pixel side in three.js (box-filtered down: the plugin's one-pixel box filter).
+THREEJS_SUPERSAMPLE = 3
+#: Seconds the three.js render may take (node + Chromium start, shader compile, render).
+THREEJS_TIMEOUT_S = 180
+#: The row's reason when three.js cannot run here.
+THREEJS_MISSING = "needs chromium and viewer/node_modules (node, `make viewer`)"
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or ("/usr/bin/chromium" if Path("/usr/bin/chromium").exists() else None)
+
+
+def _require_threejs() -> None:
+    mods = VIEWER / "node_modules"
+    if (shutil.which("node") is None or _chromium() is None or not (mods / "three").is_dir()
+            or not (mods / "playwright-core").is_dir()):
+        raise RendererMissing(THREEJS_MISSING)
+
+
+def threejs_lights(scene: dict, grid: int = THREEJS_GRID) -> list[dict]:
+    """The soft boxes as ``grid``² point lights each (three.js ``PointLight``, decay 2).
+
+    A patch of area A of a quad of radiance L, seen from the scene centre at angle θ_e to
+    the quad's normal, sends intensity I = L A cos θ_e towards it; three.js's point light
+    gives irradiance I cos θ_i / d² (no π: three.js lights are in photometric-style units
+    with radiometric meaning since r155).  Exact for the lights' far field; near a box
+    the patches resolve it to 1/``grid`` of its size."""
+    c0 = np.asarray(scene["center"], float)
+    out = []
+    for corners, radiance in scene["lights"]:
+        q = np.asarray(corners, float)
+        ex, ey = q[1] - q[0], q[3] - q[0]
+        normal = np.cross(ex, ey)
+        area = float(np.linalg.norm(normal))
+        normal /= area
+        rad = np.asarray(radiance, float)
+        peak = float(rad.max())
+        for i in range(grid):
+            for j in range(grid):
+                pos = q[0] + (i + 0.5) / grid * ex + (j + 0.5) / grid * ey
+                to_c = c0 - pos
+                cos_e = max(float(np.dot(normal, to_c / np.linalg.norm(to_c))), 0.0)
+                out.append({"position": pos.tolist(), "color": (rad / peak).tolist(),
+                            "intensity": peak * area / grid**2 * cos_e})
+    return out
+
+
+def _uv_tangents(p, n, uv, f) -> np.ndarray:
+    """Per-vertex unit ∂p/∂u ⟂ n, w = +1 (the convention of the export's own preview meshes)."""
+    P, U = p[f], uv[f]
+    dp1, dp2 = P[:, 1] - P[:, 0], P[:, 2] - P[:, 0]
+    du1, dv1 = U[:, 1, 0] - U[:, 0, 0], U[:, 1, 1] - U[:, 0, 1]
+    du2, dv2 = U[:, 2, 0] - U[:, 0, 0], U[:, 2, 1] - U[:, 0, 1]
+    det = du1 * dv2 - du2 * dv1
+    t_face = (dp1 * dv2[:, None] - dp2 * dv1[:, None]) * np.sign(det)[:, None]
+    t = np.zeros_like(p, dtype=float)
+    for k in range(3):
+        np.add.at(t, f[:, k], t_face)
+    t -= np.sum(t * n, -1, keepdims=True) * n
+    length = np.linalg.norm(t, axis=-1, keepdims=True)
+    fallback = np.cross(n, [0.0, 0.0, 1.0])  # the sphere's poles: no ∂p/∂u there
+    t = np.where(length > 1e-12, t / np.maximum(length, 1e-12), fallback)
+    t /= np.maximum(np.linalg.norm(t, axis=-1, keepdims=True), 1e-12)
+    return np.concatenate([t, np.ones((len(t), 1))], -1)
+
+
+def threejs_render(scene: dict, path, opts: LookOptions, workdir) -> tuple[np.ndarray, dict]:
+    """Render ``scene`` in three.js with the material GLTFLoader makes of the glTF/glb ``path``
+    (``viewer/scripts/gltf-look.mjs``); returns (linear image, info).
+
+    Same camera, meshes (positions, normals, UVs, tangents ∂p/∂u) and floor albedo as the
+    plugin render; the soft boxes become :func:`threejs_lights`; WebGL rasterises direct
+    light only (no shadows, no floor bounce: the approximation, docs/exports.md)."""
+    _require_threejs()
+    workdir = Path(workdir)
+    workdir.mkdir(parents=True, exist_ok=True)
+    objects = []
+    for name, (p, n, uv, f) in scene["objects"].items():
+        o = {"name": name, "fabric": name in scene["fabric"], "position": np.asarray(p, float).ravel().tolist(),
+             "normal": np.asarray(n, float).ravel().tolist(), "uv": np.asarray(uv, float).ravel().tolist(),
+             "index": np.asarray(f, int).ravel().tolist()}
+        if o["fabric"]:
+            o["tangent"] = _uv_tangents(np.asarray(p, float), np.asarray(n, float), np.asarray(uv, float),
+                                        np.asarray(f, int)).ravel().tolist()
+        objects.append(o)
+    lights = threejs_lights(scene)
+    w, h = scene["resolution"]
+    job = {"gltf": str(Path(path).resolve()), "objects": objects, "floor_albedo": scene["floor_albedo"],
+           "lights": lights, "camera": scene["camera"], "width": int(w), "height": int(h),
+           "supersample": THREEJS_SUPERSAMPLE, "output": str(workdir / "three.f32"),
+           "info": str(workdir / "three.json")}
+    job_path = workdir / "three-job.json"
+    job_path.write_text(json.dumps(job), encoding="utf-8")
+    env = dict(os.environ, CHROMIUM=_chromium())
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.run([shutil.which("node"), str(VIEWER / "scripts" / "gltf-look.mjs"), str(job_path)],
+                              cwd=VIEWER, env=env, capture_output=True, text=True, timeout=THREEJS_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        raise ExportError(f"three.js render: expected to finish within {THREEJS_TIMEOUT_S} s, it did not "
+                          f"(job {job_path})") from None
+    if proc.returncode != 0 or not Path(job["output"]).is_file():
+        tail = [ln for ln in (proc.stderr or "").splitlines() if ln.strip()][-1:] or ["no output"]
+        raise ExportError(f"three.js render failed (exit {proc.returncode}): {tail[0]}")
+    img = np.fromfile(job["output"], dtype="<f4").reshape(int(h), int(w), 3)
+    info = json.loads(Path(job["info"]).read_text(encoding="utf-8"))
+    info["point_lights"] = len(lights)
+    info["seconds"] = round(time.perf_counter() - t0, 2)
+    return img, info
 
 
 # -- comparison ------------------------------------------------------------------------------
@@ -583,6 +719,9 @@ def _look_row(fmt, path, ref: PluginReference, scene, opts, out_dir: Path, workd
                    "export": str(stem.with_name(stem.name + "_render.png")), "side_by_side": str(side)},
         "seconds": info.get("seconds"),
     }
+    if "three" in info:
+        row["three"] = {"revision": info["three"], "material": info.get("material", {}),
+                        "point_lights": info.get("point_lights")}
     if "blender" in info:
         row["blender"] = info["blender"]
         row["principled"] = info.get("principled", {})
@@ -616,9 +755,7 @@ def check_looks(model_path, exports: dict, out_dir, opts: LookOptions | None = N
         for fmt, path in exports.items():
             try:
                 row = _look_row(fmt, path, ref, scene, opts, out_dir, Path(tmp))
-            except ExportError as exc:
-                if "pip install 'kesbrdf[blender]'" not in str(exc):
-                    raise
+            except RendererMissing as exc:
                 row = {"format": fmt, "file": str(path), "renderer": RENDERERS[fmt], "skipped": str(exc)}
             if progress:
                 progress(look_line(row))
