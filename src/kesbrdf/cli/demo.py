@@ -233,8 +233,12 @@ def _exports(out: Path, model, say) -> dict:
 
 
 #: The exports whose look the demo measures, each in the renderer that reads it
-#: (kesbrdf.export.looks.RENDERERS; glb is the same material as gltf).
-LOOK_FORMATS = ("rgl-bsdf", "gltf", "mtlx", "usd")
+#: (kesbrdf.export.looks.RENDERERS; glb is the same material as gltf).  ``gltf-threejs``
+#: is the glTF export again, in three.js (~10 s; skipped without chromium and
+#: viewer/node_modules).
+LOOK_FORMATS = ("rgl-bsdf", "gltf", "gltf-threejs", "mtlx", "usd")
+#: Look rows that render another format's file: row -> the export it reads.
+LOOK_SOURCES = {"gltf-threejs": "gltf"}
 
 
 def _looks(out: Path, model_path: Path, exported: dict, say):
@@ -245,8 +249,8 @@ def _looks(out: Path, model_path: Path, exported: dict, say):
     from kesbrdf._atomic import write_text
     from kesbrdf.export.looks import check_looks
 
-    files = {fmt: exported[fmt] for fmt in LOOK_FORMATS if fmt in exported}
-    say(f"export looks: {', '.join(files)} in their renderers vs the kesbrdf plugin (Mitsuba, Blender Cycles)")
+    files = {fmt: exported[LOOK_SOURCES.get(fmt, fmt)] for fmt in LOOK_FORMATS if LOOK_SOURCES.get(fmt, fmt) in exported}
+    say(f"export looks: {', '.join(files)} in their renderers vs the kesbrdf plugin (Mitsuba, Blender Cycles, three.js)")
     result = check_looks(model_path, files, out / "looks", progress=lambda line: stderr(f"    {line}"))
     write_text(out / "exports.json", json.dumps(result, indent=1, default=str) + "\n")
     return result
