@@ -5,21 +5,21 @@ An export that *opens* in its tool (the validators of ``tests/export``) can stil
 This module renders one studio scene in the target's own renderer and compares the
 image with the kesbrdf Mitsuba plugin's render of the model itself:
 
-==============  =================================================================
-format          renderer (what reads the file)
-==============  =================================================================
-``rgl-bsdf``    Mitsuba 3 ``measured`` (the RGL tensor reader)
-``gltf/glb``    Blender Cycles, material from Blender's glTF importer
-                (``bpy.ops.import_scene.gltf``)
-``usd``         Blender Cycles, material from Blender's USD importer
-                (``bpy.ops.wm.usd_import``: the ``UsdPreviewSurface``)
-``mtlx``        Blender Cycles, Principled BSDF with the ``open_pbr_surface`` inputs
-                read from the ``.mtlx`` (Blender 4.5 imports no MaterialX; mapping in
-                :func:`openpbr_to_principled`)
-``gltf-threejs`` the glTF/glb in three.js: ``MeshPhysicalMaterial`` from its
-                ``GLTFLoader``, WebGL in headless Chromium (:func:`threejs_render`;
-                direct light only, soft boxes as grids of point lights)
-==============  =================================================================
+================  =================================================================
+format            renderer (what reads the file)
+================  =================================================================
+``rgl-bsdf``      Mitsuba 3 ``measured`` (the RGL tensor reader)
+``gltf/glb``      Blender Cycles, material from Blender's glTF importer
+                  (``bpy.ops.import_scene.gltf``)
+``usd``           Blender Cycles, material from Blender's USD importer
+                  (``bpy.ops.wm.usd_import``: the ``UsdPreviewSurface``)
+``mtlx``          Blender Cycles, Principled BSDF with the ``open_pbr_surface`` inputs
+                  read from the ``.mtlx`` (Blender 4.5 imports no MaterialX; mapping in
+                  :func:`openpbr_to_principled`)
+``gltf-threejs``  the glTF/glb in three.js: ``MeshPhysicalMaterial`` from its
+                  ``GLTFLoader``, WebGL in headless Chromium (:func:`threejs_render`;
+                  direct light only, soft boxes as grids of point lights)
+================  =================================================================
 
 Scene (:func:`studio_scene`, y-up, metres): a UV sphere (warp along the parallels)
 and the procedural folded cloth (:func:`kesbrdf.render.mesh.folded_cloth`, warp across
