@@ -3,7 +3,8 @@
 For the demo's black satin (``sadeghi-black-satin``), a twill (Irawan & Marschner
 ``cotton_twill``) and a felt (RGL ``rgl-felt-white``, measured): virtual paper-protocol
 measurement → KES model → the four exports with a renderer here (``rgl-bsdf``: Mitsuba
-``measured``; ``gltf``, ``usd``, ``mtlx``: Blender Cycles, kesbrdf.export.looks) →
+``measured``; ``gltf``, ``usd``, ``mtlx``: Blender Cycles; ``gltf-threejs``: three.js in headless
+Chromium; kesbrdf.export.looks) →
 each rendered in the look scene (sphere + folded cloth under the studio soft boxes,
 256x192, 32 spp + OIDN) and compared with the kesbrdf plugin's render of the model:
 FLIP and relative RMSE over the fabric pixels, with the noise floor (two plugin seeds).
@@ -62,6 +63,7 @@ def run() -> dict:
                 if fe is not None:
                     fit_error[fmt] = fe
             t_export = time.perf_counter() - t0
+            files["gltf-threejs"] = files["gltf"]  # the same file, in three.js
             looks = check_looks(d / "model.kes.json", files, d / "looks")
         rows = {}
         for row in looks["rows"]:
