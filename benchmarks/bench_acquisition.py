@@ -18,8 +18,8 @@ from _timing import best_of
 
 
 def run() -> dict:
-    from kesbrdf.acquisition import embedded_manifest, ingest, simulate_images
-    from kesbrdf.acquisition.manifest import read_manifest
+    from kesbrdf.measure.acquisition import embedded_manifest, ingest, simulate_images
+    from kesbrdf.measure.acquisition.manifest import read_manifest
     from kesbrdf.references.sadeghi2013 import black_satin
 
     results: dict = {}
@@ -73,10 +73,10 @@ def compare_with_reference(measurement, brdf) -> dict:
     ``nearest`` and ``linear`` (interpolation over φ), each with the deviation and
     half-vector mappings; the log fallback of DESIGN §3 where K(φ) ≤ 0.
     """
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     psi_deg = [p for p in np.arange(7.5, 180, 7.5) if p % 45]
     held = measure(brdf, "paper", orientations_deg=psi_deg)

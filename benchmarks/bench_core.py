@@ -12,12 +12,12 @@ import tracemalloc
 
 import numpy as np
 
-from kesbrdf.brdf import MAPPINGS, evaluate
+from kesbrdf.models.brdf import MAPPINGS, evaluate
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.model import fit
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.kes import fit
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validation import compare_reference
+from kesbrdf.validate.compare import compare_reference
 
 from _timing import best_of
 
@@ -75,7 +75,7 @@ def run() -> dict:
     out["dense_samples"] = len(dense)
     out["fit_s_dense_rgb"] = best_of(lambda: fit(dense), 5)
     try:
-        from kesbrdf.halfdiff import fit_halfdiff
+        from kesbrdf.models.halfdiff import fit_halfdiff
 
         out["fit_s_dense_rgb_halfdiff"] = best_of(lambda: fit_halfdiff(dense), 2)
     except ImportError:

@@ -4,7 +4,7 @@ reference, at θ_i = 0, 60, 80, 89, 89.9, 89.99° (docs/decisions.md, "Grazing e
 Each reference is measured noise-free in the paper's protocol (``kes``, ``scattered``,
 ``fibre-prior``) or the dense 6° protocol (``kes-halfdiff``), fitted with
 ``kesbrdf.fit(kind=...)``, and the directional albedo of model and reference is
-integrated by :func:`kesbrdf.diagnostics.grazing_albedo` at light azimuths φ_i = 0° and
+integrated by :func:`kesbrdf.validate.diagnostics.grazing_albedo` at light azimuths φ_i = 0° and
 90° (warp and weft); the table holds the larger of the two, channel mean.  The
 quadrature error is estimated per row as the largest change when both resolutions are
 doubled (``quad_err``).  ``gain`` = largest albedo at θ_i ≥ 80° over the largest at
@@ -13,11 +13,11 @@ for the reference.  ``bound`` is the model's own energy bound at any incidence,
 π·c + ∫max_φ q(φ, γ) dω / λ over the deviations γ the lobe covers (``kes`` tables only).
 
 The "before" table of ``results.json`` was made by this module on the source tree
-before the fix (commit 27c3494, with this ``kesbrdf.diagnostics``); ``code`` says which.
+before the fix (commit 27c3494, with this ``kesbrdf.validate.diagnostics``); ``code`` says which.
 
 ``fibre_prior_energy_scale`` (``python benchmarks/bench_energy.py --fibre-prior``, merged
 into ``results.json`` → ``energy`` by itself) is the ``fibre-prior`` column with and
-without the energy scale g of :mod:`kesbrdf.prior_model` (without = the fit as it was
+without the energy scale g of :mod:`kesbrdf.models.fibre_prior` (without = the fit as it was
 before it), and the held-out / hemisphere NRMSE of prior + residual
 (``benchmarks/bench_prior.py``'s :func:`evaluate_reference`) on a few families, both ways.
 """
@@ -50,7 +50,7 @@ def _reference(name):
 
 def _fit(ref, kind):
     import kesbrdf
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
 
     m = measure(ref, protocol="dense" if kind == "kes-halfdiff" else "paper")
     model, _ = kesbrdf.fit(m, kind=kind)
@@ -58,7 +58,7 @@ def _fit(ref, kind):
 
 
 def _albedo(brdf, n_s=N_S, n_phi=N_PHI):
-    from kesbrdf.diagnostics import GRAZING_ANGLES_DEG, grazing_albedo
+    from kesbrdf.validate.diagnostics import GRAZING_ANGLES_DEG, grazing_albedo
 
     per_phi = [grazing_albedo(brdf, GRAZING_ANGLES_DEG, p, n_s, n_phi).mean(axis=1) for p in PHI_I_DEG]
     return np.max(per_phi, axis=0)
@@ -69,7 +69,7 @@ def _bound(model) -> float | None:
     (+ the fade), or up to π when held."""
     if model.kind != "kes":
         return None
-    from kesbrdf import mappings
+    from kesbrdf.models import mappings
 
     if getattr(model, "normalisation", "sqrtcos") != "bounded":
         return math.inf  # 1/√(cos θ_i cos θ_r): unbounded as θ_i → 90°
@@ -84,11 +84,11 @@ def _bound(model) -> float | None:
 
 
 def _hemisphere_rmse() -> dict:
-    """Fig. 6 hemispheres and held-out orientations (:func:`kesbrdf.validation.compare_reference`)
+    """Fig. 6 hemispheres and held-out orientations (:func:`kesbrdf.validate.compare.compare_reference`)
     of the ``kes`` fit, before (``sqrtcos`` + ``hold``) and after the fix, RMSE in 1/sr:
     what the fix costs or gains away from grazing."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.validation import compare_reference
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.validate.compare import compare_reference
 
     out = {}
     for fam in FAMILIES:
@@ -122,7 +122,7 @@ def plugin_sample_weights(families=("ward", "sadeghi-silk-crepe"), theta_r_deg=(
     from pathlib import Path
 
     import kesbrdf
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
 
     out = {}
     rng = np.random.default_rng(seed)
@@ -148,7 +148,7 @@ def plugin_sample_weights(families=("ward", "sadeghi-silk-crepe"), theta_r_deg=(
 
 
 def _kind_row(model, a_ref):
-    from kesbrdf.diagnostics import GRAZING_ANGLES_DEG
+    from kesbrdf.validate.diagnostics import GRAZING_ANGLES_DEG
 
     a = _albedo(model.evaluate)
     a2 = _albedo(model.evaluate, 2 * N_S, 2 * N_PHI)
@@ -173,7 +173,7 @@ def fibre_prior_energy_scale() -> dict:
     """The ``fibre-prior`` rows with and without the energy scale, and the NRMSE cost."""
     import bench_prior
 
-    from kesbrdf import prior_model
+    from kesbrdf.models import fibre_prior as prior_model
 
     real = prior_model._bound_energy
     t0 = time.perf_counter()
@@ -217,9 +217,9 @@ def _json_bound(b):
 
 
 def run() -> dict:
-    from kesbrdf.diagnostics import GRAZING_ANGLES_DEG
+    from kesbrdf.validate.diagnostics import GRAZING_ANGLES_DEG
 
-    from kesbrdf import mappings
+    from kesbrdf.models import mappings
 
     fixed = hasattr(mappings, "foreshortening")
     rows, refs = {}, {}
@@ -252,7 +252,7 @@ def run() -> dict:
         "hemisphere_rmse_kes": _hemisphere_rmse() if fixed else None,
         "plugin_sample_weights": plugin_sample_weights(),
         "what": "directional albedo (max over phi_i = 0, 90 deg; channel mean) of each kind fitted to each "
-                "reference family, at theta_i_deg; quadrature kesbrdf.diagnostics.grazing_albedo",
+                "reference family, at theta_i_deg; quadrature kesbrdf.validate.diagnostics.grazing_albedo",
         "code": "bounded foreshortening + fade" if fixed else "before the grazing-energy fix (sqrtcos, hold)",
         "theta_i_deg": list(GRAZING_ANGLES_DEG),
         "quadrature": {"n_s": N_S, "n_phi": N_PHI, "quad_err": "max |a(2 n_s, 2 n_phi) - a(n_s, n_phi)|"},

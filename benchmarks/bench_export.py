@@ -1,7 +1,7 @@
 """Export benchmark: the RGL tensor ``.bsdf`` per grid resolution.
 
 For each grid (θ_i × φ_i × N², NDF resolution, floor ε): file size, writer time, and the
-agreement of Mitsuba 3's own ``measured`` ``eval`` with :func:`kesbrdf.brdf.evaluate`
+agreement of Mitsuba 3's own ``measured`` ``eval`` with :func:`kesbrdf.models.brdf.evaluate`
 (relative error of f_r·cos θ_o on the luminance, median / p90 / p99 and value-weighted,
 split grazing (either direction beyond 60°) vs not) at 20 000 random pairs with
 cos θ > 0.1, on three fitted fabrics (anisotropic Ward, Sadeghi satin, a narrow
@@ -36,8 +36,8 @@ MIN_COS = 0.1
 
 
 def _models():
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.sadeghi2013 import Sadeghi2013
     from kesbrdf.references.ward import AnisotropicWard
 

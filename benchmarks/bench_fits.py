@@ -3,7 +3,7 @@ approximate KES fabrics, and what the analytic exports of the demo model cost.
 
 For each fabric reference (anisotropic Ward, Sadeghi 2013 presets, the demo's black satin,
 Irawan's cotton twill, the RGL white felt), simulate the paper's protocol
-(``kesbrdf.gonio.measure``), fit the KES model (``kesbrdf.model.fit(..., fallback="log")``),
+(``kesbrdf.measure.gonio.measure``), fit the KES model (``kesbrdf.models.kes.fit(..., fallback="log")``),
 then fit each analytic material to that model with
 :func:`kesbrdf.export.analytic_fit.fit_analytic_uncached` (default grid) and record the
 image-space error (the objective, on the error grid), the BRDF-space errors (NRMSE,
@@ -49,10 +49,10 @@ def _reference(name):
 
 def _demo_exports() -> dict:
     """CPU of the four analytic exports of the demo model: empty cache, memory, disk."""
-    from kesbrdf import demo_data
+    from kesbrdf.measure import demo_data
     from kesbrdf.export import export, fit_cache
     from kesbrdf.io.measurement_csv import read_measurement
-    from kesbrdf.model import fit
+    from kesbrdf.models.kes import fit
 
     model = fit(read_measurement(demo_data.embedded_measurement()))
     out = {}
@@ -85,8 +85,8 @@ def run() -> dict:
     from kesbrdf.export.openpbr import OPENPBR
     from kesbrdf.export.preview_surface import PREVIEW_SURFACE
     from kesbrdf.export.standard_surface import STANDARD_SURFACE
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     results: dict = {}
     for name in REFERENCES:

@@ -39,8 +39,8 @@ def run() -> dict:
     from kesbrdf.cli.demo import DEMO_FIT_GRID
     from kesbrdf.export import export
     from kesbrdf.export.looks import LookOptions, check_looks
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     out: dict = {"options": LookOptions().to_json(), "fit_grid": DEMO_FIT_GRID}
     for name in FABRICS:

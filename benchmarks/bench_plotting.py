@@ -15,8 +15,8 @@ os.environ.setdefault("MPLBACKEND", "Agg")
 
 
 def run() -> dict:
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.plotting.figures import FIGURES, make_figure
     from kesbrdf.plotting.report import write_report
     from kesbrdf.plotting.save import figure_bytes

@@ -3,21 +3,21 @@
 For every reference of every family, measured in the paper protocol (ψ = 0, 45, 90,
 135°, θ_i + θ_r = 90°, 3° steps, 116 samples, no noise):
 
-* ``held_out``: NRMSE (:func:`kesbrdf.validation.metrics`, "all" channels) at the
-  held-out orientations ψ = 15 … 165° of :data:`kesbrdf.validation.HELD_OUT_DEG`, same
+* ``held_out``: NRMSE (:func:`kesbrdf.validate.compare.metrics`, "all" channels) at the
+  held-out orientations ψ = 15 … 165° of :data:`kesbrdf.validate.compare.HELD_OUT_DEG`, same
   protocol line;
 * ``*_within_1sigma`` / ``*_within_2sigma``: calibration of the σ users get, that of
-  the model FILE (saved and read back; :func:`kesbrdf.uncertainty.predict_sigma`:
+  the model FILE (saved and read back; :func:`kesbrdf.validate.uncertainty.predict_sigma`:
   candidates the pure prior and the stored KES table, θ_d law, off-support term) on
   the held-out orientations and the φ_i = 90° hemisphere (noise-free data, so the fit
   term is ~0 and the bands are the model terms; benchmarks/calibrate_sigma.py scores
   2 % noise);
 * ``hemi90`` / ``hemi45``: NRMSE on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90°
-  or 45°; viewer on the 2.5° grid of :func:`kesbrdf.validation.hemisphere_directions`);
+  or 45°; viewer on the 2.5° grid of :func:`kesbrdf.validate.compare.hemisphere_directions`);
 
 for three models fitted to the same samples: ``kes`` (today's default kind,
-``kesbrdf.model.fit`` with body "auto" and fallback "log", deviation mapping),
-``prior`` (the pure fibre prior, :func:`kesbrdf.prior.fit_prior`) and
+``kesbrdf.models.kes.fit`` with body "auto" and fallback "log", deviation mapping),
+``prior`` (the pure fibre prior, :func:`kesbrdf.models.fibre_physics.fit_prior`) and
 ``prior_residual`` (the ``fibre-prior`` kind).  Fit times are wall-clock and CPU
 (process) seconds of the prior fit; the machine is shared, so CPU time is the number
 to compare with the ≤ 5 s (116 samples) and ≤ 30 s (900 samples) goals.
@@ -25,7 +25,7 @@ to compare with the ≤ 5 s (116 samples) and ≤ 30 s (900 samples) goals.
 The dense protocol (6° grid, 900 samples) is run for the first reference of each
 family; CUReT fabrics (tests/data/curet_fabrics.csv, sample frame) are 5-fold cross
 validated exactly as benchmarks/bench_real_data.py does (same seeded folds), pooled
-out-of-fold log RMSE, for ``kes_body`` (:func:`kesbrdf.scattered.fit_scattered`) and
+out-of-fold log RMSE, for ``kes_body`` (:func:`kesbrdf.models.scattered.fit_scattered`) and
 the pure prior with free warp/weft axes.
 
 Families: Irawan–Marschner presets, Sadeghi presets, anisotropic Ward,
@@ -51,13 +51,13 @@ if str(HERE.parent / "src") not in sys.path:
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
-from kesbrdf.brdf import evaluate  # noqa: E402
+from kesbrdf.models.brdf import evaluate  # noqa: E402
 from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
-from kesbrdf.gonio import measure  # noqa: E402
-from kesbrdf.model import fit as kes_fit  # noqa: E402
-from kesbrdf.prior import REL_FLOOR, fit_prior  # noqa: E402
-from kesbrdf.prior_model import FibrePriorModel, calibration  # noqa: E402
-from kesbrdf.validation import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics  # noqa: E402
+from kesbrdf.measure.gonio import measure  # noqa: E402
+from kesbrdf.models.kes import fit as kes_fit  # noqa: E402
+from kesbrdf.models.fibre_physics import REL_FLOOR, fit_prior  # noqa: E402
+from kesbrdf.models.fibre_prior import FibrePriorModel, calibration  # noqa: E402
+from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics  # noqa: E402
 
 MODELS = ("kes", "prior", "prior_residual")
 
@@ -95,7 +95,7 @@ def _through_file(model):
     """``model`` saved to a model file and read back (the σ a user's file gives)."""
     import tempfile
 
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "m.kes.json")
@@ -142,7 +142,7 @@ def curet(folds: int = 5, fabrics=None) -> dict:
     """Pooled out-of-fold log RMSE per CUReT fabric: kes_body vs the pure prior."""
     import bench_real_data as real
 
-    from kesbrdf.scattered import fit_scattered
+    from kesbrdf.models.scattered import fit_scattered
 
     out = {}
     for s, m in real.load_fabrics().items():

@@ -7,10 +7,10 @@ the isotropic curve and an anisotropic Ward on every fabric.  This measures it.
 For every CUReT fabric (kesbrdf.io.curet.FABRICS) the 205 configurations are split into
 ``folds`` seeded folds; every method is fitted on the other folds and predicts the
 held-out one, so each sample is predicted once, out of fold.  Metrics
-(kesbrdf.validation.metrics) are computed on the pooled out-of-fold predictions:
+(kesbrdf.validate.compare.metrics) are computed on the pooled out-of-fold predictions:
 ``log_rmse`` (natural log, ε = 1e-3 × peak) and ``rmse`` (1/sr).
 
-Methods (one set of hyper-parameters, the defaults of kesbrdf.scattered, for all):
+Methods (one set of hyper-parameters, the defaults of kesbrdf.models.scattered, for all):
 
 - ``kes_body``      (a) fit_scattered: KES lobe (8 half-azimuths) + Lambertian body, warp searched
 - ``isotropic_body`` (b) fit_scattered(symmetry="isotropic"): q depends on γ only, + body
@@ -43,9 +43,9 @@ if str(HERE.parent / "src") not in sys.path:
 
 from kesbrdf.io.curet import FABRICS, read_curet  # noqa: E402
 from kesbrdf.io.measurement_csv import read_measurement  # noqa: E402
-from kesbrdf.measurement import Measurement  # noqa: E402
-from kesbrdf.scattered import evaluate_sample_frame, fit_scattered, fit_ward  # noqa: E402
-from kesbrdf.validation import metrics  # noqa: E402
+from kesbrdf.measure.measurement import Measurement  # noqa: E402
+from kesbrdf.models.scattered import evaluate_sample_frame, fit_scattered, fit_ward  # noqa: E402
+from kesbrdf.validate.compare import metrics  # noqa: E402
 
 SHARED = Path("/work/shared/data/curet")
 EXTRACT = HERE.parent / "tests" / "data" / "curet_fabrics.csv"
@@ -147,7 +147,7 @@ def run(fabrics=None, folds: int = N_FOLDS) -> dict:
 
 def sensitivity(factors=(1 / 3, 3.0)) -> dict:
     """Wins of (a) over (b) and (d) over (b) with both smoothness weights scaled."""
-    from kesbrdf.scattered import DEFAULT_SMOOTH_GAMMA, DEFAULT_SMOOTH_PHI
+    from kesbrdf.models.scattered import DEFAULT_SMOOTH_GAMMA, DEFAULT_SMOOTH_PHI
 
     data = load_fabrics()
     out = {}

@@ -35,8 +35,8 @@ SEEDS = (1, 2, 3)
 
 
 def _model(path: Path) -> Path:
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     # the satin-ward reference of the CLI (kesbrdf.cli._common), black satin

@@ -4,11 +4,11 @@ For each felt (all three from ``/work/shared/data/rgl`` when present, else the o
 committed in ``tests/data/rgl``):
 
 * ``<felt>_kes_<mapping>_<light>_{rmse,log_rmse,nrmse}``: the paper-protocol model
-  (ψ = 0, 45, 90, 135°, θ_i + θ_r = 90°, 3° steps; ``kesbrdf.model.fit``) read through
+  (ψ = 0, 45, 90, 135°, θ_i + θ_r = 90°, 3° steps; ``kesbrdf.models.kes.fit``) read through
   each mapping, on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90° or 45°; viewer on
   a 2.5° grid to 87.5°);
 * ``<felt>_halfdiff_<light>_...``: the ``kes-halfdiff`` model from the dense protocol
-  (6° grid of (θ_i, θ_r) at the four orientations; ``kesbrdf.halfdiff.fit_halfdiff``);
+  (6° grid of (θ_i, θ_r) at the four orientations; ``kesbrdf.models.halfdiff.fit_halfdiff``);
 * ``<felt>_constant_<light>_...``: the hemisphere's own mean value, a floor any model
   should beat;
 * ``<felt>_held_out_max_rel``: max relative error of the paper-protocol model
@@ -16,7 +16,7 @@ committed in ``tests/data/rgl``):
   ``<felt>_line_non_reciprocity``, the data's own max |f(i,r) − f(r,i)|/max there,
   which bounds it (tests/references/test_rgl.py).
 
-rmse in 1/sr; log_rmse and nrmse as :func:`kesbrdf.validation.metrics`.
+rmse in 1/sr; log_rmse and nrmse as :func:`kesbrdf.validate.compare.metrics`.
 """
 
 from __future__ import annotations
@@ -49,7 +49,7 @@ def hemisphere_errors(felt, models: dict) -> dict:
 
     ``models`` maps a label to a callable f(wi, wr) -> (..., 3)."""
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.validation import HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
+    from kesbrdf.validate.compare import HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
 
     wr, _, _ = hemisphere_directions()
     wr = wr.reshape(-1, 3)
@@ -68,10 +68,10 @@ def hemisphere_errors(felt, models: dict) -> dict:
 
 
 def run() -> dict:
-    from kesbrdf.brdf import MAPPINGS, evaluate
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff
-    from kesbrdf.model import fit
+    from kesbrdf.models.brdf import MAPPINGS, evaluate
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.rgl import RGLMeasured
 
     result = {}

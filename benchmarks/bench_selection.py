@@ -4,17 +4,17 @@ For every reference of benchmarks/bench_prior.py (Irawan–Marschner and Sadeghi
 anisotropic Ward, Ashikhmin–Shirley, the RGL felt) and the demo's black satin, measured
 in the paper protocol with 2 % multiplicative noise (seeded per reference):
 
-* **oracle**: the true off-sample NRMSE (:func:`kesbrdf.validation.metrics`, all
+* **oracle**: the true off-sample NRMSE (:func:`kesbrdf.validate.compare.metrics`, all
   channels, against the noise-free reference) of ``kes``, the pure ``prior`` and
   ``prior+residual`` fitted to all the samples, on the held-out orientations
-  (:data:`kesbrdf.validation.HELD_OUT_DEG`) and the two Fig. 6 hemispheres; ``score``
+  (:data:`kesbrdf.validate.compare.HELD_OUT_DEG`) and the two Fig. 6 hemispheres; ``score``
   is the mean of the three, and the oracle's choice is the candidate with the lowest
   score.  The linear and nearest interpolation baselines are scored too.
 * **evidence**: what a rule may use, computed from the noisy samples only:
-  :func:`kesbrdf.selection.loo_compare` (per orientation), the mirror discrepancy
+  :func:`kesbrdf.validate.selection.loo_compare` (per orientation), the mirror discrepancy
   between the two biases and the KES-free interpolation over ψ
-  (:func:`kesbrdf.selection.mirror_test`,
-  :func:`kesbrdf.selection.orientation_interpolation_loo`).
+  (:func:`kesbrdf.validate.selection.mirror_test`,
+  :func:`kesbrdf.validate.selection.orientation_interpolation_loo`).
 * **rules**: each rule's choice per reference, agreement with the oracle, and the
   summed score of its choices per family, beside always-``kes`` and the oracle.  A
   rule with a threshold has it chosen leave-one-family-out (the threshold is picked
@@ -38,14 +38,14 @@ if str(HERE.parent / "src") not in sys.path:
 if str(HERE) not in sys.path:
     sys.path.insert(0, str(HERE))
 
-from kesbrdf.brdf import evaluate  # noqa: E402
+from kesbrdf.models.brdf import evaluate  # noqa: E402
 from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
-from kesbrdf.gonio import measure  # noqa: E402
-from kesbrdf.model import fit as kes_fit  # noqa: E402
-from kesbrdf.prior import fit_prior  # noqa: E402
-from kesbrdf.prior_model import FibrePriorModel, ratio_measurement, ratio_table  # noqa: E402
-from kesbrdf.selection import choose, loo_compare  # noqa: E402
-from kesbrdf.validation import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics  # noqa: E402
+from kesbrdf.measure.gonio import measure  # noqa: E402
+from kesbrdf.models.kes import fit as kes_fit  # noqa: E402
+from kesbrdf.models.fibre_physics import fit_prior  # noqa: E402
+from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio_table  # noqa: E402
+from kesbrdf.validate.selection import choose, loo_compare  # noqa: E402
+from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics  # noqa: E402
 
 #: Multiplicative noise of the simulated measurements (σ = 2 % of the value).
 NOISE = 0.02
@@ -106,7 +106,7 @@ def _med(ev, cand, psis):
 
 
 def _as_result(ev, z_limit=None):
-    """The evidence as a :func:`kesbrdf.selection.loo_compare` result, optionally with
+    """The evidence as a :func:`kesbrdf.validate.selection.loo_compare` result, optionally with
     another limit on the mirror test's z."""
     mirror = dict(ev["mirror"])
     if z_limit is not None and mirror.get("z") is not None:
@@ -123,7 +123,7 @@ def rule_bias_loo(ev, z_limit=None):
 
 
 def rule_adequacy_always(ev, z_limit=None):
-    """:func:`kesbrdf.selection.choose` with every fabric taken as mirror-symmetric: the
+    """:func:`kesbrdf.validate.selection.choose` with every fabric taken as mirror-symmetric: the
     interpolation baseline only, kes's bias error never a comparison."""
     return choose(_as_result(ev, z_limit=np.inf))[0]
 
@@ -136,7 +136,7 @@ def rule_adequacy_0_90(ev, z_limit=None):
 
 
 def rule_choose(ev, z_limit=None):
-    """:func:`kesbrdf.selection.choose` (mirror test, then adequacy): the rule adopted."""
+    """:func:`kesbrdf.validate.selection.choose` (mirror test, then adequacy): the rule adopted."""
     return choose(_as_result(ev, z_limit))[0]
 
 

@@ -27,9 +27,9 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def run() -> dict:
-    from kesbrdf.demo_data import embedded_measurement
+    from kesbrdf.measure.demo_data import embedded_measurement
     from kesbrdf.io.measurement_csv import read_measurement
-    from kesbrdf.model import fit
+    from kesbrdf.models.kes import fit
     from kesbrdf.viewer.server import make_server
 
     results: dict = {}

@@ -1,14 +1,14 @@
 """Regenerate src/kesbrdf/data/satin_ward_paper.csv (deterministic).
 
 116 samples (paper protocol: psi = 0, 45, 90, 135 deg; theta_i = 90 - 3k, theta_r = 3k,
-k = 1..29) of a satin-like anisotropic Ward BRDF (kesbrdf.demo_data.SATIN_WARD) with 1 %
+k = 1..29) of a satin-like anisotropic Ward BRDF (kesbrdf.measure.demo_data.SATIN_WARD) with 1 %
 relative noise plus an absolute floor of 2e-4 1/sr, seed 2026.  SIMULATED data.
 """
 
 from pathlib import Path
 
-from kesbrdf.demo_data import SATIN_WARD
-from kesbrdf.gonio import measure
+from kesbrdf.measure.demo_data import SATIN_WARD
+from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import write_measurement
 from kesbrdf.references.ward import AnisotropicWard
 

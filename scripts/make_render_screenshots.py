@@ -32,8 +32,8 @@ def diagnosis_strip(path: Path) -> list[dict]:
 
     from PIL import Image, ImageDraw
 
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.sadeghi2013 import black_satin
     from kesbrdf.render import scenes as S
     from kesbrdf.render.compare import auto_exposure, cloth_mask

@@ -3,7 +3,7 @@
 "Virtual black satin" is *simulated*: the Sadeghi et al. (2013) satin preset darkened
 like the black satin of Takeda et al. (:func:`kesbrdf.references.sadeghi2013.black_satin`),
 photographed by the virtual gonioreflectometer
-(:func:`kesbrdf.acquisition.camera.simulate_images`) under the paper's protocol:
+(:func:`kesbrdf.measure.acquisition.camera.simulate_images`) under the paper's protocol:
 4 orientations × 29 geometries of sample frames, a white-reference frame at each of
 the 29 geometries, and one dark frame per exposure time.  Frames are 24×24-pixel
 16-bit RGB TIFF (zlib) with a 16×16 ROI.  The seed is fixed, so running this script
@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from kesbrdf.acquisition.camera import simulate_images
-from kesbrdf.acquisition.images import read_image
+from kesbrdf.measure.acquisition.camera import simulate_images
+from kesbrdf.measure.acquisition.images import read_image
 from kesbrdf.references.sadeghi2013 import black_satin
 
 SEED = 20130301  # fixed: the embedded frames are reproducible bit for bit

@@ -1,5 +1,5 @@
 """The kes BRDF evaluation of kesbrdf 0.1.0, kept verbatim (math only) as the regression
-reference for the optimised :mod:`kesbrdf.brdf` (tests/test_brdf.py).  Not imported by
+reference for the optimised :mod:`kesbrdf.models.brdf` (tests/test_brdf.py).  Not imported by
 the package."""
 
 import numpy as np

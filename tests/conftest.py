@@ -57,7 +57,7 @@ def small_rig(tmp_path, lambertian_rgb):
     """Frames + manifest of a Lambertian sample in a small rig; returns the manifest path."""
     from acq_helpers import SMALL_RIG
 
-    from kesbrdf.acquisition.camera import simulate_images
+    from kesbrdf.measure.acquisition.camera import simulate_images
 
     return simulate_images(lambertian_rgb, tmp_path / "rig", seed=7, **SMALL_RIG)
 
@@ -74,7 +74,7 @@ def satin_ref():
 @pytest.fixture(scope="session")
 def satin_measurement(satin_ref):
     """The paper's protocol (116 samples) on the satin reference, no noise."""
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
 
     m = measure(satin_ref)
     m.sha256 = "0" * 63 + "1"  # a recognisable stand-in hash for provenance checks
@@ -83,15 +83,15 @@ def satin_measurement(satin_ref):
 
 @pytest.fixture(scope="session")
 def satin_model(satin_measurement):
-    from kesbrdf.model import fit
+    from kesbrdf.models.kes import fit
 
     return fit(satin_measurement)
 
 
 # rendering: small model files fitted from reference BRDFs
 def _fit_and_save(path, ref, **fit_kwargs):
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     model = fit(measure(ref), **fit_kwargs)
     model.save(path)

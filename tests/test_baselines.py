@@ -1,13 +1,13 @@
-"""Default model vs interpolation baselines (kesbrdf.baselines) and its report sections."""
+"""Default model vs interpolation baselines (kesbrdf.validate.baselines) and its report sections."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from kesbrdf.baselines import compare_models, verdicts
-from kesbrdf.gonio import measure
-from kesbrdf.model import fit as kes_fit
+from kesbrdf.validate.baselines import compare_models, verdicts
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.kes import fit as kes_fit
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
 
 
@@ -64,7 +64,7 @@ def test_compare_models_ranks_a_worse_model_below(satin):
         n_channels = kes.n_channels
 
         def evaluate(self, wi, wr, mapping=None):
-            from kesbrdf.brdf import evaluate
+            from kesbrdf.models.brdf import evaluate
             return 2.0 * evaluate(kes, wi, wr, mapping)
 
     res = compare_models(m, ref, {"kes": kes, "x2": Scaled()}, {"linear": kes_fit(m, interpolation="linear")}, "x2")
@@ -78,7 +78,7 @@ def test_compare_models_ranks_a_worse_model_below(satin):
 def test_report_has_comparison_table_uncertainty_and_planning(satin):
     import kesbrdf
     from kesbrdf.plotting.report import build_report
-    from kesbrdf.prior_model import FibrePriorModel
+    from kesbrdf.models.fibre_prior import FibrePriorModel
 
     ref, m = satin
     model, report = kesbrdf.fit(m)  # kind=auto: the prior comparison lands in diagnostics
@@ -110,7 +110,7 @@ def test_report_has_comparison_table_uncertainty_and_planning(satin):
 def test_uncertainty_figure_values(satin):
     """The σ map is finite and non-negative inside the disk, blank outside."""
     from kesbrdf.plotting.report_prior import figure_uncertainty
-    from kesbrdf.prior_model import FibrePriorModel
+    from kesbrdf.models.fibre_prior import FibrePriorModel
 
     ref, m = satin
     fig = figure_uncertainty(FibrePriorModel.fit_measurement(m), ref, n=21)

@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import MAPPINGS, evaluate, lookup, paper_phi_gamma, to_phi_gamma, validate_mapping
+from kesbrdf.models.brdf import MAPPINGS, evaluate, lookup, paper_phi_gamma, to_phi_gamma, validate_mapping
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.geometry import in_plane_directions, spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.model import fit
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.kes import fit
 
 #: Reciprocity by construction: (φ, γ) are computed from symmetric expressions, so only
 #: round-off separates f(i, r) and f(r, i).
@@ -88,7 +88,7 @@ def test_unknown_mapping():
 
 
 def test_energy_below_one_for_a_physical_reference(model):
-    from kesbrdf.diagnostics import diagnose
+    from kesbrdf.validate.diagnostics import diagnose
 
     d = diagnose(model)
     assert d["albedo"]["above_one"] == []
@@ -105,7 +105,7 @@ V010_RTOL = 1e-12
 def test_identical_to_the_v010_implementation(rng, mapping):
     import brdf_v010
 
-    from kesbrdf.mappings import COS_EPS
+    from kesbrdf.models.mappings import COS_EPS
     from kesbrdf.references.ward import AnisotropicWard
 
     # 0.1.0 divided by √(cos θ_i cos θ_r) and held the last γ column: compare the arithmetic
@@ -124,7 +124,7 @@ def test_identical_to_the_v010_implementation(rng, mapping):
 
 @pytest.mark.parametrize("mapping", MAPPINGS)
 def test_horizon_gives_exact_zero_and_grazing_stays_bounded(model, mapping):
-    from kesbrdf.mappings import COS_EPS
+    from kesbrdf.models.mappings import COS_EPS
 
     wi = spherical_to_cartesian(np.radians(90.0), 0.3)  # cos = 6e-17: at the horizon
     wr = spherical_to_cartesian(np.radians(30.0), 2.0)
@@ -139,7 +139,7 @@ def test_horizon_gives_exact_zero_and_grazing_stays_bounded(model, mapping):
     f = evaluate(model, wi, wr, mapping)
     bound = (model.body.max() + model.table.max()) / COS_EPS
     if mapping == "paper":
-        from kesbrdf.mappings import PAPER_MIN_SIN_BETA
+        from kesbrdf.models.mappings import PAPER_MIN_SIN_BETA
 
         bound /= PAPER_MIN_SIN_BETA
     assert np.all(np.isfinite(f)) and np.all(f >= 0) and np.all(f <= bound)
@@ -171,7 +171,7 @@ def test_non_finite_gives_nan_and_finite_input_never_does(model, rng):
 
 
 def test_chunked_evaluation_matches_one_chunk(model, random_pairs):
-    from kesbrdf import mappings
+    from kesbrdf.models import mappings
 
     wi, wr = random_pairs
     whole = mappings.evaluate_pairs(model.evaluate_unit, wi, wr, model.n_channels, "deviation", chunk=10**9)

@@ -28,8 +28,8 @@ def test_fit_on_dense_data_chooses_halfdiff_and_says_so(dense, tmp_path, capsys)
 
 
 def test_fit_on_the_demo_measurement_succeeds_with_a_warning(tmp_path, capsys):
-    from kesbrdf import demo_data
-    from kesbrdf.acquisition.ingest import ingest
+    from kesbrdf.measure import demo_data
+    from kesbrdf.measure.acquisition.ingest import ingest
     from kesbrdf.io.measurement_csv import write_measurement
 
     meas = tmp_path / "measurement.csv"

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from kesbrdf.diagnostics import diagnose, directional_albedo, reciprocity_error
-from kesbrdf.gonio import measure
-from kesbrdf.model import fit
+from kesbrdf.validate.diagnostics import diagnose, directional_albedo, reciprocity_error
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.kes import fit
 from kesbrdf.references.ward import AnisotropicWard
 
 #: Midpoint quadrature at 1°: the Lambertian albedo is exact to O(Δθ²) ≈ 1e-4.

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 import kesbrdf
-from kesbrdf.diagnostics import GRAZING_ANGLES_DEG, grazing_albedo
-from kesbrdf.gonio import measure
+from kesbrdf.validate.diagnostics import GRAZING_ANGLES_DEG, grazing_albedo
+from kesbrdf.measure.gonio import measure
 from kesbrdf.references.registry import make_reference
 
 #: Every kind on two families: a half-vector Gaussian (Ward) and a bright microcylinder
@@ -62,7 +62,7 @@ def test_kes_albedo_stays_below_the_tables_own_bound(fits, family):
     the measured table itself sets (mappings docstring), finite only with the fix."""
     import math
 
-    from kesbrdf.mappings import BOUNDED_LAMBDA, fade
+    from kesbrdf.models.mappings import BOUNDED_LAMBDA, fade
 
     model = fits[family, "kes"]
     g = np.linspace(0.0, np.pi, 4001)
@@ -76,8 +76,8 @@ def test_kes_albedo_stays_below_the_tables_own_bound(fits, family):
 def test_files_without_the_new_parameters_evaluate_as_before(tmp_path, random_pairs):
     """A model file written before the fix (no ``normalisation``/``extrapolation``) keeps
     its meaning: q/√(cos θ_i cos θ_r) with the last γ column held, as it was fitted."""
-    from kesbrdf.mappings import to_phi_gamma
-    from kesbrdf.model import load
+    from kesbrdf.models.mappings import to_phi_gamma
+    from kesbrdf.models.kes import load
 
     legacy = kesbrdf.fit(measure(make_reference("ward")), kind="kes", normalisation="sqrtcos", extrapolation="hold")[0]
     del legacy.parameters["normalisation"], legacy.parameters["extrapolation"]
@@ -93,8 +93,8 @@ def test_energy_scaled_fibre_prior_keeps_reciprocity_and_the_measured_samples(fi
     """The energy scale g(ωi)g(ωr) is symmetric and the residual is refitted to the scaled
     prior: reciprocity to round-off and every measured in-plane sample above the ratio
     floor returned (same tolerance as tests/test_prior.py's round trip)."""
-    from kesbrdf.diagnostics import reciprocity_error
-    from kesbrdf.prior_model import RATIO_FLOOR
+    from kesbrdf.validate.diagnostics import reciprocity_error
+    from kesbrdf.models.fibre_prior import RATIO_FLOOR
 
     model = fits[family, "fibre-prior"]
     assert model.energy is not None and model.energy.scale.min() < 1.0  # the scale is in use here
@@ -109,7 +109,7 @@ def test_energy_scaled_fibre_prior_keeps_reciprocity_and_the_measured_samples(fi
 def test_fibre_prior_file_keeps_its_energy_scale_and_old_files_have_none(tmp_path, fits, random_pairs):
     """Saved and read back, the energy table gives the same f_r; a file written before it
     (no ``energy`` field) evaluates as the unscaled prior × residual it was fitted as."""
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     model = fits["sadeghi-velvet", "fibre-prior"]
     back = load(model.save(tmp_path / "v.kes.json"))

@@ -9,10 +9,10 @@ import pytest
 
 import kesbrdf
 from kesbrdf.errors import KesbrdfError, KESError, MeasurementError
-from kesbrdf.gonio import measure
-from kesbrdf.measurement import Measurement
+from kesbrdf.measure.gonio import measure
+from kesbrdf.measure.measurement import Measurement
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validation import validate
+from kesbrdf.validate.compare import validate
 
 #: Every fitter reproduces its inputs at the measured geometries up to round-off.
 ROUND_TRIP_NRMSE = 1e-9
@@ -99,7 +99,7 @@ def test_report_is_recorded_in_the_model_file(tmp_path):
 def test_a_new_fitter_joins_auto_selection(monkeypatch):
     """A future kind (e.g. the woven-cloth prior) joins with one FIT_MODULES line and a
     place in AUTO_CANDIDATES; it wins when it uses more rows."""
-    from kesbrdf import kinds
+    from kesbrdf.models import base as kinds
 
     @kinds.register_fitter("everything")
     class Everything:
@@ -126,7 +126,7 @@ def test_a_new_fitter_joins_auto_selection(monkeypatch):
 
 def test_auto_compares_with_the_prior_on_held_out_orientations():
     """Paper protocol: kes and the fibre prior are compared leave-one-orientation-out
-    (kesbrdf.selection.choose).  Ward is symmetric in y, so the bias errors cannot
+    (kesbrdf.validate.selection.choose).  Ward is symmetric in y, so the bias errors cannot
     decide; the pure prior does not beat interpolation over ψ on all four orientations
     (a microfacet lobe is outside its family), and kes is kept, as the oracle of
     benchmarks/bench_selection.py says for both Ward references."""

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from kesbrdf.errors import KesbrdfError
-from kesbrdf.gonio import measure, protocol_geometry
+from kesbrdf.measure.gonio import measure, protocol_geometry
 from kesbrdf.references.ward import AnisotropicWard
 
 

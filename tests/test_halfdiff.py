@@ -5,11 +5,11 @@ import json
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.errors import KESError, MeasurementError, ModelError
 from kesbrdf.geometry import in_plane_directions, spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.halfdiff import (
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.halfdiff import (
     KIND,
     evaluate_halfdiff,
     fit_halfdiff,
@@ -19,9 +19,9 @@ from kesbrdf.halfdiff import (
     to_dict,
     to_half_diff,
 )
-from kesbrdf.model import fit
+from kesbrdf.models.kes import fit
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validation import HEMISPHERE_LIGHTS_DEG, hemisphere_directions
+from kesbrdf.validate.compare import HEMISPHERE_LIGHTS_DEG, hemisphere_directions
 
 #: Every in-plane sample sits on a grid node: only float round-off through trig,
 #: 1/K and the trilinear weights (observed ~1e-14).
@@ -259,7 +259,7 @@ def test_mirror_behaviour_reports_the_differing_peaks(dense_model):
 
 
 def test_directional_albedo_matches_the_reference(ward_rgb, dense_model):
-    from kesbrdf.diagnostics import directional_albedo
+    from kesbrdf.validate.diagnostics import directional_albedo
 
     wi = spherical_to_cartesian(np.radians([0.0, 30.0, 60.0]), np.radians([0.0, 45.0, 90.0]))
     albedo = directional_albedo(lambda a, b: evaluate_halfdiff(dense_model, a, b), wi)
@@ -269,7 +269,7 @@ def test_directional_albedo_matches_the_reference(ward_rgb, dense_model):
 
 
 def test_scattered_incidence_angles_are_resampled(ward_rgb, rng):
-    from kesbrdf.measurement import Measurement
+    from kesbrdf.measure.measurement import Measurement
 
     n = 300  # per orientation, (θ_i, θ_r) uniform in [0, 83°]: no common grid
     psi = np.repeat(np.radians([0.0, 45.0, 90.0, 135.0]), n)
@@ -286,8 +286,8 @@ def test_scattered_incidence_angles_are_resampled(ward_rgb, rng):
 
 
 def test_edges_horizon_unnormalised_and_unsupported_mappings(dense_model, random_pairs):
-    """The kinds contract's front end holds for this kind too (kesbrdf.mappings)."""
-    from kesbrdf.brdf import evaluate
+    """The kinds contract's front end holds for this kind too (kesbrdf.models.mappings)."""
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian
 
     wi, wr = random_pairs

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from kesbrdf import kes
+from kesbrdf.models import interpolation as kes
 
 #: Pure float arithmetic on O(1) numbers: agreement to a few ulps.
 ROUND_OFF = 1e-12

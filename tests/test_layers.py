@@ -8,13 +8,14 @@ count too: a lazy import is still a dependency), and the test fails when
   such as ``kesbrdf._atomic`` or ``kesbrdf.cli._common`` are fine, and so are
   private names within one module.
 
-Layers, lowest first.  DESIGN §6 reads as data flow (io → measurement → kes → model
-→ brdf → validation → apps); in the import graph the data type ``measurement`` sits
-below the readers that build it.  ``mappings`` (direction mappings) is at the bottom,
-``kinds`` (the registry) beside the model-file codec that looks it up,
-``references`` (analytic BRDFs) and ``gonio``/``acquisition`` (the virtual and the
-image-based instruments) with the readers; ``fitting`` (``kesbrdf.fit``) and the
-package root with ``brdf``; ``export`` and ``batch`` with the applications.
+Layers, lowest first (docs/architecture.md).  The paper's steps are folders:
+``measure`` (acquire), ``models`` (interpolate and model; ``models.interpolation`` is
+eq. 1-2 and sits below the kinds, ``models.base`` is the interface and registry beside
+the model-file codec that looks it up) and ``validate``.  In the import graph the data
+type ``measure.measurement`` sits below the readers that build it, and the direction
+mappings at the bottom.  The applications are ordered too: ``cli`` over ``batch`` over
+the four views (plotting, render, viewer, export) over ``cloth``, so that a batch step
+importing the command line fails here.
 """
 
 from __future__ import annotations
@@ -31,18 +32,20 @@ PACKAGE = SRC / "kesbrdf"
 #: longest matching prefix.
 LAYERS = [
     ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry",
-              "kesbrdf.mappings", "kesbrdf.marginal2d"]),
-    ("measurement", ["kesbrdf.measurement"]),
-    ("io", ["kesbrdf.io", "kesbrdf.kinds", "kesbrdf.references", "kesbrdf.gonio", "kesbrdf.acquisition",
-            "kesbrdf.demo_data"]),
-    ("kes", ["kesbrdf.kes"]),
-    ("model", ["kesbrdf.model", "kesbrdf.halfdiff", "kesbrdf.scattered", "kesbrdf.prior", "kesbrdf.prior_model"]),
-    ("brdf", ["kesbrdf.brdf"]),
-    ("validation", ["kesbrdf.validation", "kesbrdf.diagnostics", "kesbrdf.compare", "kesbrdf.selection",
-                    "kesbrdf.uncertainty", "kesbrdf.baselines"]),
-    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.planning"]),
-    ("apps", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.cli", "kesbrdf.viewer", "kesbrdf.cloth",
-              "kesbrdf.export", "kesbrdf.batch"]),
+              "kesbrdf.models.mappings", "kesbrdf.references.marginal2d"]),
+    ("measurement", ["kesbrdf.measure", "kesbrdf.measure.measurement"]),
+    ("io", ["kesbrdf.io", "kesbrdf.models.base", "kesbrdf.references", "kesbrdf.measure.gonio",
+            "kesbrdf.measure.acquisition", "kesbrdf.measure.demo_data"]),
+    ("interpolate", ["kesbrdf.models.interpolation"]),
+    ("model", ["kesbrdf.models"]),
+    ("brdf", ["kesbrdf.models.brdf"]),
+    ("validate", ["kesbrdf.validate"]),
+    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.measure.planning"]),
+    # The applications, in order: cli over batch over the four views over cloth.
+    ("cloth", ["kesbrdf.cloth"]),
+    ("views", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.viewer", "kesbrdf.export"]),
+    ("batch", ["kesbrdf.batch"]),
+    ("cli", ["kesbrdf.cli"]),
 ]
 
 
@@ -164,7 +167,7 @@ def test_module_level_imports_have_no_cycle():
 
 
 @pytest.mark.parametrize("source,expected", [
-    ("from kesbrdf.model import _fill_table\n", "imports _fill_table from kesbrdf.model"),
+    ("from kesbrdf.models.kes import _fill_table\n", "imports _fill_table from kesbrdf.models.kes"),
     ("from kesbrdf.plotting import figures\n", "kesbrdf.plotting.figures"),
 ])
 def test_the_checker_sees_violations(tmp_path, monkeypatch, source, expected):
@@ -174,6 +177,6 @@ def test_the_checker_sees_violations(tmp_path, monkeypatch, source, expected):
     found = list(imports(fake))
     target, private, _ = found[0]
     if "imports" in expected:
-        assert private == ["_fill_table"] and target == "kesbrdf.model"
+        assert private == ["_fill_table"] and target == "kesbrdf.models.kes"
     else:
-        assert target == expected and layer_of(target) > layer_of("kesbrdf.kes")
+        assert target == expected and layer_of(target) > layer_of("kesbrdf.models.interpolation")

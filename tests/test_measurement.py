@@ -1,10 +1,10 @@
-"""kesbrdf.measurement: the in-plane construction (DESIGN §2), shapes, views and subsets."""
+"""kesbrdf.measure.measurement: the in-plane construction (DESIGN §2), shapes, views and subsets."""
 
 import numpy as np
 import pytest
 
 from kesbrdf.errors import MeasurementError
-from kesbrdf.measurement import PAPER_ORIENTATIONS, PAPER_ORIENTATIONS_DEG, Measurement
+from kesbrdf.measure.measurement import PAPER_ORIENTATIONS, PAPER_ORIENTATIONS_DEG, Measurement
 
 #: Directions built from angles: rounding of sin/cos only.
 DIRECTION_ATOL = 1e-12

@@ -5,10 +5,10 @@ import json
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.errors import KESError, MeasurementError, ModelError
-from kesbrdf.gonio import measure
-from kesbrdf.model import fit, load
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.kes import fit, load
 from kesbrdf.references.ward import AnisotropicWard
 
 #: Exact reproduction of inputs: only float round-off through trig and the lookup.
@@ -50,7 +50,7 @@ def test_isotropic_reference_is_matched_at_every_orientation(rng):
 
 
 def test_kes_beats_both_baselines_at_held_out_orientations(ward):
-    from kesbrdf.validation import compare_reference
+    from kesbrdf.validate.compare import compare_reference
 
     m = measure(ward, noise=0.01, rng=5)
     result = compare_reference(m, ward)
@@ -147,7 +147,7 @@ def test_kes_table_has_no_spike_where_k_nears_zero():
     fall back like K ≤ 0, so no table value exceeds OVERSHOOT × the brightest measured
     orientation at its γ (the bound is the rule itself; the log fallback is held within
     the measured range)."""
-    from kesbrdf.model import OVERSHOOT
+    from kesbrdf.models.kes import OVERSHOOT
     from kesbrdf.references.registry import make_reference
 
     m = measure(make_reference("sadeghi-satin"), noise=0.01, rng=1)

@@ -1,16 +1,16 @@
-"""Protocol planning (kesbrdf.planning): sample groups, expected error, greedy plan."""
+"""Protocol planning (kesbrdf.measure.planning): sample groups, expected error, greedy plan."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from kesbrdf import planning
-from kesbrdf.brdf import evaluate
+from kesbrdf.measure import planning
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.model import fit
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.kes import fit
 from kesbrdf.references.ward import AnisotropicWard
 
 #: Geometry identities are exact up to float rounding of trig functions.
@@ -105,8 +105,8 @@ def test_plan_rejects_bad_budget_and_empty_truths():
 def test_fitter_names_the_kind_and_rejects_unknown_ones():
     """`kesbrdf plan --kind`: auto is the default fit; a kind fits that kind; a typo is one line."""
     from kesbrdf.errors import KesbrdfError
-    from kesbrdf.gonio import measure
-    from kesbrdf.planning import default_fit, fitter
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.measure.planning import default_fit, fitter
     from kesbrdf.references.ward import AnisotropicWard
 
     assert fitter("auto") is default_fit

@@ -1,4 +1,4 @@
-"""Tests of the fibre prior (kesbrdf.prior) and the fibre-prior model kind (kesbrdf.prior_model)."""
+"""Tests of the fibre prior (kesbrdf.models.fibre_physics) and the fibre-prior model kind (kesbrdf.models.fibre_prior)."""
 
 from __future__ import annotations
 
@@ -9,11 +9,11 @@ import pytest
 
 from kesbrdf.errors import ModelError
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.kinds import kind_class
-from kesbrdf.prior import FibrePrior, PriorSpec, fit_prior
-from kesbrdf.prior_model import FibrePriorModel
-from kesbrdf.selection import loo_compare
+from kesbrdf.measure.gonio import measure
+from kesbrdf.models.base import kind_class
+from kesbrdf.models.fibre_physics import FibrePrior, PriorSpec, fit_prior
+from kesbrdf.models.fibre_prior import FibrePriorModel
+from kesbrdf.validate.selection import loo_compare
 from kesbrdf.references.irawan2012 import Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
 
@@ -199,10 +199,10 @@ CAL_MAX_MEDIAN_SIGMA_LOG = 0.5
 
 @pytest.mark.parametrize("ref", [Irawan2012("cotton_twill"), Sadeghi2013("satin")], ids=["irawan_twill", "sadeghi_satin"])
 def test_uncertainty_calibration(ref):
-    from kesbrdf.brdf import evaluate
-    from kesbrdf.model import fit as kes_fit
-    from kesbrdf.prior_model import calibration
-    from kesbrdf.validation import HELD_OUT_DEG, hemisphere_directions
+    from kesbrdf.models.brdf import evaluate
+    from kesbrdf.models.kes import fit as kes_fit
+    from kesbrdf.models.fibre_prior import calibration
+    from kesbrdf.validate.compare import HELD_OUT_DEG, hemisphere_directions
 
     m = measure(ref, noise=0.02, noise_floor=1e-4, rng=3)
     model = FibrePriorModel.fit_measurement(m, kinds=("filament", "filament"))
@@ -219,7 +219,7 @@ def test_uncertainty_calibration(ref):
 
 
 def test_residual_reproduces_dense_protocol_samples():
-    """Several incidence lines: the residual lives on (φ_h, θ_h, θ_d) (kesbrdf.halfdiff)
+    """Several incidence lines: the residual lives on (φ_h, θ_h, θ_d) (kesbrdf.models.halfdiff)
     and every sample of every line is reproduced."""
     m = measure(Irawan2012("silk_charmeuse"), protocol="dense", step_deg=10)
     model = FibrePriorModel.fit_measurement(m, kinds=("filament", "filament"))
@@ -237,8 +237,8 @@ def test_few_off_slice_samples_keep_the_fixed_theta_d_law():
     (d₂ ran to its bound and the law to 10⁴× at θ_i = 70°); the Fresnel law stays fixed,
     and the model stays bounded at a light the samples never saw."""
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.planning import PROTOCOLS, simulate
-    from kesbrdf.prior import MIN_THETA_D_SAMPLES, fit_prior
+    from kesbrdf.measure.planning import PROTOCOLS, simulate
+    from kesbrdf.models.fibre_physics import MIN_THETA_D_SAMPLES, fit_prior
     from kesbrdf.references.registry import make_reference
 
     ref = make_reference("sadeghi-satin")

@@ -1,4 +1,4 @@
-"""The analytic Jacobian of the fibre prior (kesbrdf.prior.evaluate_with_jacobian)."""
+"""The analytic Jacobian of the fibre prior (kesbrdf.models.fibre_physics.evaluate_with_jacobian)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from kesbrdf.prior import (FibrePrior, PriorSpec, _Data, _residual_jacobian, _residuals_batch, _solve, evaluate_batch,
+from kesbrdf.models.fibre_physics import (FibrePrior, PriorSpec, _Data, _residual_jacobian, _residuals_batch, _solve, evaluate_batch,
                            evaluate_with_jacobian)
 
 SEED = 11

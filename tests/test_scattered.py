@@ -11,21 +11,21 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.errors import KesbrdfError, MeasurementError
-from kesbrdf.gonio import measure
+from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import read_measurement
-from kesbrdf.measurement import Measurement
-from kesbrdf.model import fit, load
+from kesbrdf.measure.measurement import Measurement
+from kesbrdf.models.kes import fit, load
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.scattered import (
+from kesbrdf.models.scattered import (
     RotatedBRDF,
     evaluate_sample_frame,
     fit_scattered,
     fit_ward,
     to_fabric_frame,
 )
-from kesbrdf.validation import metrics
+from kesbrdf.validate.compare import metrics
 
 EXTRACT = Path(__file__).resolve().parent / "data" / "curet_fabrics.csv"
 
@@ -75,7 +75,7 @@ def _held_out(model, test):
 
 @pytest.fixture(scope="module")
 def kes_truth():
-    """A deviation-mapping KES model built by kesbrdf.model.fit from an anisotropic Ward."""
+    """A deviation-mapping KES model built by kesbrdf.models.kes.fit from an anisotropic Ward."""
     return fit(measure(AnisotropicWard(0.15, 0.4, rho_d=0.4, rho_s=0.15)), fallback="log")
 
 

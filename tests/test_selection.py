@@ -1,4 +1,4 @@
-"""kesbrdf.selection: the mirror test, the interpolation baseline, and the auto rule.
+"""kesbrdf.validate.selection: the mirror test, the interpolation baseline, and the auto rule.
 
 The rule's reference is benchmarks/bench_selection.py (the true off-sample error of
 every candidate on 18 references); two of its cases are checked here at the same noise
@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from kesbrdf.fitting import FitReport
-from kesbrdf.gonio import measure
-from kesbrdf.measurement import Measurement
+from kesbrdf.measure.gonio import measure
+from kesbrdf.measure.measurement import Measurement
 from kesbrdf.references.irawan2012 import Irawan2012
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.selection import INTERPOLATION, MIRROR_Z, choose, loo_compare, mirror_test, orientation_interpolation_loo
+from kesbrdf.validate.selection import INTERPOLATION, MIRROR_Z, choose, loo_compare, mirror_test, orientation_interpolation_loo
 
 #: Noise of the bench's measurements (benchmarks/bench_selection.py, NOISE).
 NOISE = 0.02
@@ -104,7 +104,7 @@ def test_line_helpers_refuse_several_incidence_lines():
     dense data (15 lines per orientation) is a one-line error, not a meaningless NRMSE."""
     from kesbrdf.errors import MeasurementError
     from kesbrdf.references.ward import AnisotropicWard
-    from kesbrdf.selection import mirror_test, orientation_interpolation_loo
+    from kesbrdf.validate.selection import mirror_test, orientation_interpolation_loo
 
     dense = measure(AnisotropicWard(0.1, 0.3), protocol="dense", step_deg=15)
     for helper in (mirror_test, orientation_interpolation_loo):

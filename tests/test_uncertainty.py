@@ -1,4 +1,4 @@
-"""Per-prediction σ (kesbrdf.uncertainty): eval --uncertainty, validate coverage, calibration."""
+"""Per-prediction σ (kesbrdf.validate.uncertainty): eval --uncertainty, validate coverage, calibration."""
 
 from __future__ import annotations
 
@@ -11,15 +11,15 @@ import pytest
 from kesbrdf.cli.main import main
 from kesbrdf.errors import ModelError
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import measure
+from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import write_measurement
-from kesbrdf.model import load
-from kesbrdf.prior_model import FibrePriorModel
+from kesbrdf.models.kes import load
+from kesbrdf.models.fibre_prior import FibrePriorModel
 from kesbrdf.references.irawan2012 import Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.uncertainty import coverage, predict_sigma
-from kesbrdf.validation import HELD_OUT_DEG, hemisphere_directions
+from kesbrdf.validate.uncertainty import coverage, predict_sigma
+from kesbrdf.validate.compare import HELD_OUT_DEG, hemisphere_directions
 
 # Calibration of the σ a model FILE carries: fit (Laplace) ⊕ spread to the pure prior
 # and to the stored KES table ⊕ θ_d law ⊕ off-support term c·d, with the one global
@@ -137,7 +137,7 @@ def test_old_payload_without_kes_candidate_reads_and_says_so(fitted, tmp_path):
 
 
 def test_support_distance_is_zero_on_the_measured_slice():
-    from kesbrdf.prior_model import support_distance
+    from kesbrdf.models.fibre_prior import support_distance
 
     support = {"theta_d_deg": [45.0, 45.0], "gamma_max_deg": 60.0}
     # in-plane pair on the paper's line θ_i + θ_r = 90°: θ_d = 45°, γ = 30° (inside)
@@ -172,7 +172,7 @@ def prior_files(tmp_path_factory):
 
 
 def test_eval_uncertainty_columns(prior_files, tmp_path):
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     d, _ = prior_files
     out = tmp_path / "o.csv"
@@ -204,7 +204,7 @@ def test_eval_uncertainty_on_kes_is_a_one_line_error(prior_files, tmp_path, caps
     assert "carries no uncertainty" in err and "fibre-prior" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "o.csv").exists()
     with pytest.raises(ModelError):
-        from kesbrdf.model import load
+        from kesbrdf.models.kes import load
 
         predict_sigma(load(d / "k.kes.json"), np.array([[0, 0, 1.0]]), np.array([[0, 0, 1.0]]))
 

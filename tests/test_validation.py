@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from kesbrdf.gonio import measure
+from kesbrdf.measure.gonio import measure
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validation import compare_reference, leave_one_orientation_out, metrics
+from kesbrdf.validate.compare import compare_reference, leave_one_orientation_out, metrics
 
 
 def test_metrics_by_hand():

@@ -2,7 +2,7 @@
 
 The CLI (``kesbrdf fit``), the viewer's upload and the demo all call :func:`fit`.
 ``kind="auto"`` picks the fitter that uses every row of the measurement, trying
-:data:`kesbrdf.kinds.AUTO_CANDIDATES` in order (docs/models.md):
+:data:`kesbrdf.models.base.AUTO_CANDIDATES` in order (docs/models.md):
 
 * the paper's protocol (one incidence line at ψ = 0, 45, 90, 135°) → ``kes``;
 * several incidence angles per orientation → ``kes-halfdiff``;
@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, MeasurementError
-from kesbrdf.kinds import AUTO_CANDIDATES, fitter_class, known_fitters
+from kesbrdf.models.base import AUTO_CANDIDATES, fitter_class, known_fitters
 
 __all__ = ["fit", "FitReport", "choose_fitter"]
 
@@ -52,10 +52,10 @@ class FitReport:
         The model's one-line warnings.
     comparison : dict or None
         ``kind="auto"`` on in-plane data: the leave-one-orientation-out comparison of the
-        row-based choice with the woven-cloth prior (:func:`kesbrdf.selection.loo_compare`):
+        row-based choice with the woven-cloth prior (:func:`kesbrdf.validate.selection.loo_compare`):
         median NRMSE per candidate on the held-out biases and (prior, interpolation over
         ψ) on all four orientations, the mirror test of the biases, the candidate kept
-        and why (:func:`kesbrdf.selection.choose`); :meth:`comparison_summary` is the
+        and why (:func:`kesbrdf.validate.selection.choose`); :meth:`comparison_summary` is the
         one-line form.
     """
 
@@ -156,7 +156,7 @@ def _protocol(name: str) -> str:
     }.get(name, name)
 
 
-#: The prior's candidates in :func:`kesbrdf.selection.loo_compare` and the options that build them.
+#: The prior's candidates in :func:`kesbrdf.validate.selection.loo_compare` and the options that build them.
 PRIOR_CANDIDATES = {"prior": {"residual": False}, "prior+residual": {"residual": True}}
 
 
@@ -165,10 +165,10 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
 
     Parameters
     ----------
-    measurement : kesbrdf.measurement.Measurement
+    measurement : kesbrdf.measure.measurement.Measurement
     kind : str
         ``"auto"`` (module docstring) or a fitter name: ``"kes"``, ``"kes-halfdiff"``,
-        ``"scattered"``, or any other in :data:`kesbrdf.kinds.FIT_MODULES`.
+        ``"scattered"``, or any other in :data:`kesbrdf.models.base.FIT_MODULES`.
     strict : bool
         Make the K(φ) ≤ 0 log fallback an error (``fallback="error"``); only for the
         kinds that have that option.
@@ -177,17 +177,17 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
         prior (``fibre-prior``) can use every row too, compare them by
         leave-one-orientation-out validation on this measurement and keep prior +
         residual only where it beats every comparison the data allow
-        (:func:`kesbrdf.selection.choose`; ``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
+        (:func:`kesbrdf.validate.selection.choose`; ``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
         skips it, and so does any fit option (options belong to one kind).
     **options
         Passed to the fitter; an option it does not accept is an error.
 
     Returns
     -------
-    model : kesbrdf.kinds.ReflectanceModel
+    model : kesbrdf.models.base.ReflectanceModel
     report : FitReport
 
-    >>> from kesbrdf.gonio import measure
+    >>> from kesbrdf.measure.gonio import measure
     >>> from kesbrdf.references.ward import AnisotropicWard
     >>> model, report = fit(measure(AnisotropicWard(0.2, 0.3), protocol="dense", step_deg=10))
     >>> report.kind, report.rows_used == report.rows_total
@@ -239,7 +239,7 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
 
 
 def _kfold_with_prior(m) -> dict | None:
-    """:func:`kesbrdf.selection.kfold_compare` of the scattered fit and the prior."""
+    """:func:`kesbrdf.validate.selection.kfold_compare` of the scattered fit and the prior."""
     try:
         prior_cls = fitter_class("fibre-prior")
     except (ImportError, KesbrdfError):
@@ -247,7 +247,7 @@ def _kfold_with_prior(m) -> dict | None:
     mask, _ = prior_cls.usable_rows(m)
     if not mask.all():
         return None
-    from kesbrdf.selection import kfold_compare
+    from kesbrdf.validate.selection import kfold_compare
 
     try:
         result = kfold_compare(m, ("scattered", "fibre-prior"))
@@ -259,8 +259,8 @@ def _kfold_with_prior(m) -> dict | None:
 
 
 def _compare_with_prior(m) -> dict | None:
-    """:func:`kesbrdf.selection.loo_compare` when the prior can use every row, with the
-    candidate kept and why (:func:`kesbrdf.selection.choose`)."""
+    """:func:`kesbrdf.validate.selection.loo_compare` when the prior can use every row, with the
+    candidate kept and why (:func:`kesbrdf.validate.selection.choose`)."""
     try:
         prior_cls = fitter_class("fibre-prior")
     except (ImportError, KesbrdfError):  # the prior needs scipy (extra "fit")
@@ -268,13 +268,13 @@ def _compare_with_prior(m) -> dict | None:
     mask, _ = prior_cls.usable_rows(m)
     if not mask.all():
         return None
-    from kesbrdf.selection import loo_compare
+    from kesbrdf.validate.selection import loo_compare
 
     try:
         result = loo_compare(m)
     except KesbrdfError:  # too few orientations to hold one out: nothing to compare
         return None
-    from kesbrdf.selection import choose
+    from kesbrdf.validate.selection import choose
 
     result["kept"], result["why"] = choose(result)
     return result

@@ -62,8 +62,8 @@ def in_plane_directions(psi, theta_i, theta_r) -> tuple[np.ndarray, np.ndarray]:
 def grazing_albedo(brdf, theta_deg, phi_deg=0.0, n_s: int = 96, n_phi: int = 192) -> np.ndarray:
     r"""Directional albedo at incidences up to grazing, shape (len(theta_deg), C).
 
-    Here (numpy only) so the model layer can use it (:mod:`kesbrdf.prior_model`'s energy
-    scale); :mod:`kesbrdf.diagnostics` re-exports it.
+    Here (numpy only) so the model layer can use it (:mod:`kesbrdf.models.fibre_prior`'s energy
+    scale); :mod:`kesbrdf.validate.diagnostics` re-exports it.
 
     :math:`a(\omega_i) = \int f_r\cos\theta_r\,d\omega_r = \int_0^{2\pi}\int_0^1 f_r\,u\,du\,d\phi_r`
     with u = cos θ_r = s²: Gauss–Legendre in s ∈ (0, 1) (``n_s`` nodes, dense near the

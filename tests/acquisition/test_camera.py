@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from kesbrdf.acquisition.camera import EXPOSURE_LADDER_S, simulate_images
-from kesbrdf.acquisition.images import read_image
-from kesbrdf.acquisition.manifest import read_manifest
-from kesbrdf.acquisition.sensor import Sensor
+from kesbrdf.measure.acquisition.camera import EXPOSURE_LADDER_S, simulate_images
+from kesbrdf.measure.acquisition.images import read_image
+from kesbrdf.measure.acquisition.manifest import read_manifest
+from kesbrdf.measure.acquisition.sensor import Sensor
 from kesbrdf.errors import KesbrdfError
 
 from acq_helpers import SMALL_RIG, Lambertian

@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 from acq_helpers import exposures, predicted_sigma
 
-from kesbrdf.acquisition import embedded_manifest, ingest
-from kesbrdf.acquisition.manifest import read_manifest
-from kesbrdf.acquisition.sensor import Sensor
+from kesbrdf.measure.acquisition import embedded_manifest, ingest
+from kesbrdf.measure.acquisition.manifest import read_manifest
+from kesbrdf.measure.acquisition.sensor import Sensor
 
 ROOT = Path(__file__).resolve().parents[2]
 #: What may be committed for the embedded sample (issue: "keep the images small").

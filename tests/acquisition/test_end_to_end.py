@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 from acq_helpers import exposures, predicted_sigma
 
-from kesbrdf import brdf as brdf_module
-from kesbrdf import model as model_module
-from kesbrdf.acquisition.camera import simulate_images
-from kesbrdf.acquisition.ingest import ingest
-from kesbrdf.acquisition.sensor import Sensor
+from kesbrdf.models import brdf as brdf_module
+from kesbrdf.models import kes as model_module
+from kesbrdf.measure.acquisition.camera import simulate_images
+from kesbrdf.measure.acquisition.ingest import ingest
+from kesbrdf.measure.acquisition.sensor import Sensor
 
 #: See the module docstring.
 Z_MAX = 4.5

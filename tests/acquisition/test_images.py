@@ -6,8 +6,8 @@ import zlib
 import numpy as np
 import pytest
 
-from kesbrdf.acquisition.images import linearize, read_image, sha256_file, write_image
-from kesbrdf.acquisition.sensor import srgb_encode
+from kesbrdf.measure.acquisition.images import linearize, read_image, sha256_file, write_image
+from kesbrdf.measure.acquisition.sensor import srgb_encode
 from kesbrdf.errors import FormatError
 
 

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 from acq_helpers import Lambertian, edit_manifest, exposures, predicted_sigma
 
-from kesbrdf.acquisition.camera import simulate_images
-from kesbrdf.acquisition.images import read_image, sha256_file, write_image
-from kesbrdf.acquisition.ingest import IngestError, ingest, robust_mean
-from kesbrdf.acquisition.sensor import Sensor
+from kesbrdf.measure.acquisition.camera import simulate_images
+from kesbrdf.measure.acquisition.images import read_image, sha256_file, write_image
+from kesbrdf.measure.acquisition.ingest import IngestError, ingest, robust_mean
+from kesbrdf.measure.acquisition.sensor import Sensor
 from kesbrdf.errors import KesbrdfError
 
 #: Every ingested value lies within this many predicted standard deviations of the

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from kesbrdf.acquisition.manifest import format_manifest, parse_manifest, read_manifest
+from kesbrdf.measure.acquisition.manifest import format_manifest, parse_manifest, read_manifest
 from kesbrdf.errors import FormatError
 
 GOOD = """# kesbrdf-manifest: 1

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from kesbrdf.acquisition.sensor import Sensor, srgb_decode, srgb_encode, vignetting_map
+from kesbrdf.measure.acquisition.sensor import Sensor, srgb_decode, srgb_encode, vignetting_map
 from kesbrdf.errors import KesbrdfError
 
 #: Pixels in the flat test frames; the sample std of n Gaussian values has a relative

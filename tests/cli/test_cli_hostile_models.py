@@ -20,9 +20,9 @@ from kesbrdf.io.text import MAX_ABS_NUMBER
 @pytest.fixture(scope="module")
 def base(tmp_path_factory):
     """A measurement, a valid kes model file (small grid) and a pairs file."""
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
     from kesbrdf.io.measurement_csv import write_measurement
-    from kesbrdf.model import fit
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     d = tmp_path_factory.mktemp("hostile")
@@ -157,7 +157,7 @@ def test_export_refuses_an_in_memory_model_no_file_could_hold(base, tmp_path, va
     """The Python API: a model built in memory with 1e308 / inf / NaN is refused like a file."""
     from kesbrdf.errors import ExportError
     from kesbrdf.export import export
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     model = load(base / "model.kes.json")
     model.table[1, 1, 0] = value

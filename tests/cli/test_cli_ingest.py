@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 from acq_helpers import SMALL_RIG, Lambertian, edit_manifest
 
-from kesbrdf.acquisition.camera import simulate_images
-from kesbrdf.acquisition.images import read_image, write_image
+from kesbrdf.measure.acquisition.camera import simulate_images
+from kesbrdf.measure.acquisition.images import read_image, write_image
 from kesbrdf.cli.main import main
 from kesbrdf.io.measurement_csv import read_measurement
 

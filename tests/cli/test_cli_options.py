@@ -16,9 +16,9 @@ FAST_S = 10.0
 
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
     from kesbrdf.io.measurement_csv import write_measurement
-    from kesbrdf.model import fit
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     d = tmp_path_factory.mktemp("options")

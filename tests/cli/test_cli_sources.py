@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from source_helpers import CURET_EXTRACT, RGL_FELT, write_curet, write_merl
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.cli.main import main
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.io.measurement_csv import read_measurement
-from kesbrdf.model import load
+from kesbrdf.models.kes import load
 from kesbrdf.references.rgl_tensor import RGLTensorBRDF
 from kesbrdf.references.ward import AnisotropicWard
 

@@ -11,8 +11,8 @@ TEST_FIT_GRID = ((4, 8), (6, 12))
 @pytest.fixture(scope="session")
 def kes_model():
     """A KES model fitted to a simulated anisotropic Ward fabric (RGB)."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     return fit(measure(AnisotropicWard(0.1, 0.25, rho_d=[0.3, 0.2, 0.1], rho_s=0.08)))

@@ -160,8 +160,8 @@ def test_fresnel_dielectric_limits():
 
 def test_fit_of_a_fabric_model_reports_error(ward):
     """On a KES model of a Ward fabric the glTF fit is an approximation: error reported, finite, < 1."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     model = fit(measure(ward))
     res = fit_analytic(GLTF_PBR, model, grid=SMALL, error_grid=SMALL)

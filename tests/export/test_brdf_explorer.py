@@ -4,7 +4,7 @@ The agreement is checked in two steps that together cover the file:
 1. the GLSL ``BRDF`` function, run in headless Chromium (WebGL2), equals its numpy port
    (:func:`kesbrdf.export.brdf_explorer.numpy_port`) to float32 rounding, on a small
    baked table (SwiftShader compiles large constant arrays slowly);
-2. the numpy port on the full-resolution table equals :func:`kesbrdf.brdf.evaluate`
+2. the numpy port on the full-resolution table equals :func:`kesbrdf.models.brdf.evaluate`
    to float64 rounding, and the default downsampled table's error is bounded.
 Both for a current model file (bounded foreshortening, fading lobe) and a file written
 before those parameters existed (√(cos θ_i cos θ_r), last column held; docs/formats.md).
@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.export import brdf_explorer as be
 
@@ -29,7 +29,7 @@ VIEWER = Path(__file__).resolve().parents[2] / "viewer"
 #: float32 shading against the float64 port (f_r spans ~1e-3..1e2; 1e-4 relative is
 #: ~1000 float32 ulps, far below any mapping or lookup bug, which gives O(1) errors)
 GLSL_REL_TOL = 1e-4
-#: float64 port against float64 kesbrdf.brdf.evaluate (same recipe, same table)
+#: float64 port against float64 kesbrdf.models.brdf.evaluate (same recipe, same table)
 PORT_REL_TOL = 1e-9
 #: default 90-φ table against the full model, measured on the test fabric (Ward):
 #: p90 0.09 %, max 1 %; bounds with margin

@@ -16,8 +16,8 @@ TOY = "_kesbrdf_test.toyformat"
 
 @pytest.fixture(scope="module")
 def model():
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     return fit(measure(AnisotropicWard(0.1, 0.2, rho_d=[0.3, 0.2, 0.1], rho_s=0.1)))

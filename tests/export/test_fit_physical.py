@@ -51,8 +51,8 @@ DIFFUSE_REL_TOL = 0.3
 
 
 def _kes(reference):
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     return fit(measure(reference))
 
@@ -133,7 +133,7 @@ def test_the_fit_is_computed_once_per_model_content(tmp_path, monkeypatch, kes_m
     Surface, preview) the first time, none for the same content again, whether the model
     object is the same, reloaded from its file (memory) or in a new process (disk)."""
     from kesbrdf.export import export
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     monkeypatch.setenv("KESBRDF_CACHE_DIR", str(tmp_path / "cache"))
     fit_cache.clear_memory()

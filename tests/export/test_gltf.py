@@ -80,7 +80,7 @@ def test_written_ior_is_the_fibre_index_the_fit_assumed():
     fitted fibre range; with ior 1.5 the KHR_materials_specular F0 base is 0.04."""
     from kesbrdf.export.analytic_fit import FIBRE_IOR_RANGE
     from kesbrdf.export.gltf_pbr import IOR, equivalent_ior
-    from kesbrdf.prior import THETA_D_ETA
+    from kesbrdf.models.fibre_physics import THETA_D_ETA
 
     assert IOR == THETA_D_ETA and FIBRE_IOR_RANGE[0] < IOR < FIBRE_IOR_RANGE[1]
     assert ((IOR - 1) / (IOR + 1)) ** 2 == pytest.approx(0.04)

@@ -120,7 +120,7 @@ def test_merl_random_pairs_match_the_analytic_brdf(merl_file, rng):
 
 
 def test_merl_through_the_gonio_simulator(merl_file):
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
     from kesbrdf.references.merl import MERLBinary
 
     m = measure(MERLBinary(merl_file[0]))

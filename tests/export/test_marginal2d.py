@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kesbrdf.marginal2d import Marginal2D
+from kesbrdf.references.marginal2d import Marginal2D
 
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None
 FELT = Path(__file__).resolve().parents[1] / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"

@@ -18,8 +18,8 @@ MEAN_REL_BOUND = 0.05
 @pytest.fixture(scope="module")
 def scene_files(tmp_path_factory):
     from kesbrdf.export import export
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     model = fit(measure(AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1)))
@@ -56,8 +56,8 @@ def test_both_scenes_load_and_render_alike(scene_files, tmp_path, monkeypatch):
 def test_unknown_option_fails_before_writing(tmp_path):
     from kesbrdf.errors import ExportError
     from kesbrdf.export import export
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     model = fit(measure(AnisotropicWard(0.2, 0.2)))
@@ -69,8 +69,8 @@ def test_unknown_option_fails_before_writing(tmp_path):
 def test_other_kinds_get_the_measured_scene(tmp_path):
     from kesbrdf._drjit import import_mitsuba
     from kesbrdf.export import export
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
     from kesbrdf.references.ward import AnisotropicWard
 
     mi, _ = import_mitsuba("test")

@@ -50,8 +50,8 @@ def _dirs(rng, n, min_cos=MIN_COS):
 
 @pytest.fixture(scope="module")
 def model():
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     return fit(measure(AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1)))
@@ -110,7 +110,7 @@ def test_exact_at_the_table_nodes(model, exported, plugin):
     """ω_i on a grid node, ω_o from the writer's own warp of a table node: float32-exact."""
     from kesbrdf.export.rgl_bsdf import model_brdf
     from kesbrdf.io.tensor_file import read_tensor_file
-    from kesbrdf.marginal2d import Marginal2D
+    from kesbrdf.references.marginal2d import Marginal2D
     from kesbrdf.references.rgl import eval_plugin
 
     f = read_tensor_file(exported[0])
@@ -136,8 +136,8 @@ def test_exact_at_the_table_nodes(model, exported, plugin):
 
 
 def test_mitsuba_eval_agrees_with_the_model(model, plugin, rng):
-    """Random pairs: Mitsuba ``measured`` vs kesbrdf.brdf.evaluate (f_r·cos θ_light)."""
-    from kesbrdf.brdf import evaluate
+    """Random pairs: Mitsuba ``measured`` vs kesbrdf.models.brdf.evaluate (f_r·cos θ_light)."""
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.references.rgl import eval_plugin
 
     w_view, w_light = _dirs(rng, N_PAIRS), _dirs(rng, N_PAIRS)
@@ -149,7 +149,7 @@ def test_mitsuba_eval_agrees_with_the_model(model, plugin, rng):
 
 
 def test_node_incidence_isolates_the_table_interpolation(model, exported, plugin, rng):
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.io.tensor_file import read_tensor_file
     from kesbrdf.references.rgl import eval_plugin
 
@@ -167,7 +167,7 @@ def test_node_incidence_isolates_the_table_interpolation(model, exported, plugin
 def test_mitsuba_sampling_weights_match_the_albedo(model, plugin):
     """``measured.sample`` (VNDF + luminance warps) is unbiased: mean weight = ∫ f cos dω."""
     from kesbrdf._drjit import import_mitsuba
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.references.rgl import _Variant
 
     mi, dr = import_mitsuba("test")
@@ -219,7 +219,7 @@ def test_render_matches_plugin(model, exported, tmp_path):
 def test_model_vndf_option_loads_agrees_and_samples_unbiased(model, tmp_path, rng):
     """``vndf="model"``: the warp follows the model's lobe, luminance is flat (docs/exports.md)."""
     from kesbrdf._drjit import import_mitsuba
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.export import export
     from kesbrdf.io.tensor_file import read_tensor_file
     from kesbrdf.references.rgl import _Variant, eval_plugin, load_plugin

@@ -52,8 +52,8 @@ def test_analytic_observer_agrees_with_mitsubas_cie_tables():
 @pytest.fixture(scope="module")
 def files(tmp_path_factory):
     from kesbrdf.export import export
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     model = fit(measure(AnisotropicWard(0.12, 0.3, rho_d=[0.3, 0.12, 0.05], rho_s=0.1)))

@@ -141,7 +141,7 @@ b.png,dark,,,,0.25
 @settings(max_examples=examples(TEXT_EXAMPLES))
 @given(data=mutated(MANIFEST_SEEDS))
 def test_manifest_loads_or_raises_typed_error(work, data):
-    from kesbrdf.acquisition.manifest import read_manifest
+    from kesbrdf.measure.acquisition.manifest import read_manifest
 
     path = work / "manifest.csv"
     path.write_bytes(data)
@@ -218,7 +218,7 @@ def test_curet_abrdf_loads_or_raises_typed_error(work, abrdf, which):
 # -- camera frames ----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def image_seeds(work):
-    from kesbrdf.acquisition.images import write_image
+    from kesbrdf.measure.acquisition.images import write_image
 
     rng = np.random.default_rng(7)
     seeds = {}
@@ -235,7 +235,7 @@ def image_seeds(work):
 
 @pytest.mark.parametrize("name", ["rgb8.png", "grey16.png", "rgb16.tif", "rgb.exr"])
 def test_images_load_or_raise_typed_error(work, image_seeds, name):
-    from kesbrdf.acquisition.images import read_image
+    from kesbrdf.measure.acquisition.images import read_image
 
     @settings(max_examples=examples(IMAGE_EXAMPLES) // 4)  # four image formats share the count
     @given(data=mutated([image_seeds[name]], text=False))
@@ -312,10 +312,10 @@ def test_any_input_loads_or_raises_typed_error(work, data, name):
 # -- model files (kesbrdf.io.model_file) ------------------------------------------------
 def _model_seeds() -> dict:
     """Small valid model files of the table kinds (written with the writer's indent)."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
     from kesbrdf.io.model_file import model_to_dict
-    from kesbrdf.model import fit
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     ref = AnisotropicWard(0.15, 0.3, rho_d=0.1, rho_s=0.1)

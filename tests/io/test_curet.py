@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import to_phi_gamma
+from kesbrdf.models.brdf import to_phi_gamma
 from kesbrdf.errors import FormatError, MeasurementError
 from kesbrdf.io.curet import FABRICS, N_CONFIGURATIONS, read_curet
 from kesbrdf.io.measurement_csv import read_measurement

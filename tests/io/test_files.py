@@ -40,8 +40,8 @@ def _call(fn, *args):
 
 
 def _readers():
-    from kesbrdf.acquisition.images import read_image
-    from kesbrdf.acquisition.manifest import read_manifest
+    from kesbrdf.measure.acquisition.images import read_image
+    from kesbrdf.measure.acquisition.manifest import read_manifest
     from kesbrdf.io.curet import read_table
     from kesbrdf.io.measurement_csv import read_measurement
     from kesbrdf.io.model_file import load_model

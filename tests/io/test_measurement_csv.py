@@ -5,7 +5,7 @@ import pytest
 
 from kesbrdf.cli.main import main
 from kesbrdf.errors import FormatError, MeasurementError
-from kesbrdf.gonio import measure
+from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import read_measurement, write_measurement
 from kesbrdf.references.ward import AnisotropicWard
 

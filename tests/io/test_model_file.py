@@ -44,9 +44,9 @@ def examples(kind: str) -> int:
 
 
 def _small_models():
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
 
     ref = AnisotropicWard(0.15, 0.3, rho_d=0.1, rho_s=0.1)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kesbrdf.acquisition.manifest import read_manifest
+from kesbrdf.measure.acquisition.manifest import read_manifest
 from kesbrdf.errors import FormatError
 from kesbrdf.io.curet import read_curet
 from kesbrdf.io.measurement_csv import read_measurement

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from kesbrdf.errors import KesbrdfError
-from kesbrdf.measurement import Measurement
+from kesbrdf.measure.measurement import Measurement
 from kesbrdf.plotting import figures as F
 
 #: The model reproduces every in-plane sample to round-off (DESIGN §4); the curves are
@@ -233,7 +233,7 @@ def test_figure_4_needs_a_model(satin_measurement):
 
 
 def test_figure_5_radius_is_the_table(satin_model):
-    from kesbrdf.brdf import lookup
+    from kesbrdf.models.brdf import lookup
 
     fig = F.figure_5(satin_model, gamma_deg=[0.0, 12.0, 24.0], n_phi=37)
     axes = fig.axes
@@ -258,7 +258,7 @@ def test_figure_5_normalised_and_domain(satin_model):
 
 
 def test_figure_6_difference_is_zero_for_the_model_itself(satin_model):
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     def same(wi, wr):
         return evaluate(satin_model, wi, wr)
@@ -319,7 +319,7 @@ def _general_samples(brdf_fn, theta_i_deg, phi_i_deg, rng, k=25):
 
 
 def test_figure_6_measured_points_at_the_light(satin_model, rng):
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     m = _general_samples(lambda wi, wr: evaluate(satin_model, wi, wr), 30.0, 90.0, rng)
     fig = F.figure_6(satin_model, m, n=21)

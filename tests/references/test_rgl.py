@@ -235,7 +235,7 @@ def test_unknown_parameterisation_raises():
 
 @needs_mitsuba
 def test_albedo_at_most_one(felt):
-    from kesbrdf.diagnostics import directional_albedo
+    from kesbrdf.validate.diagnostics import directional_albedo
 
     wi = spherical_to_cartesian(np.radians([0.0, 30.0, 60.0, 80.0]), np.radians([0.0, 45.0, 90.0, 200.0]))
     albedo = directional_albedo(felt, wi)
@@ -247,8 +247,8 @@ def test_albedo_at_most_one(felt):
 # --- end to end: four orientations of an isotropic felt -> KES -> every orientation ----
 @pytest.fixture(scope="module")
 def paper_fit(felt):
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     m = measure(felt)
     return m, fit(m)
@@ -258,7 +258,7 @@ def paper_fit(felt):
 def test_in_plane_data_is_the_same_at_every_orientation(felt):
     """What makes the end-to-end check possible: the felt is isotropic on the paper line
     (up to the pole's rounding at γ = 0)."""
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
 
     ref = measure(felt, orientations_deg=(0.0,))
     for psi in (45.0, 112.5):
@@ -268,7 +268,7 @@ def test_in_plane_data_is_the_same_at_every_orientation(felt):
 
 @needs_mitsuba
 def test_fit_returns_every_measured_sample(paper_fit):
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     m, model = paper_fit
     np.testing.assert_allclose(evaluate(model, m.wi, m.wr), m.values, rtol=1e-9)
@@ -276,9 +276,9 @@ def test_fit_returns_every_measured_sample(paper_fit):
 
 @needs_mitsuba
 def test_reciprocal_felt_is_reproduced_at_every_orientation(felt):
-    from kesbrdf.brdf import evaluate
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.models.brdf import evaluate
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     sym = _Symmetrised(felt)
     model = fit(measure(sym))
@@ -290,8 +290,8 @@ def test_reciprocal_felt_is_reproduced_at_every_orientation(felt):
 
 @needs_mitsuba
 def test_raw_felt_held_out_error_is_bounded_by_its_non_reciprocity(felt, paper_fit):
-    from kesbrdf.brdf import evaluate
-    from kesbrdf.gonio import measure
+    from kesbrdf.models.brdf import evaluate
+    from kesbrdf.measure.gonio import measure
 
     m, model = paper_fit
     transposed = felt(m.wr, m.wi)
@@ -305,8 +305,8 @@ def test_raw_felt_held_out_error_is_bounded_by_its_non_reciprocity(felt, paper_f
 
 def _hemisphere_metrics(felt, model, mapping):
     """Worst (rmse, log_rmse) over the two Fig. 6 lights."""
-    from kesbrdf.brdf import evaluate
-    from kesbrdf.validation import HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
+    from kesbrdf.models.brdf import evaluate
+    from kesbrdf.validate.compare import HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
 
     wr, _, _ = hemisphere_directions()
     wr = wr.reshape(-1, 3)
@@ -330,8 +330,8 @@ def test_hemisphere_errors_of_the_paper_protocol_model(felt, paper_fit, mapping)
 
 @needs_mitsuba
 def test_hemisphere_errors_of_the_halfdiff_model(felt):
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
 
     model = fit_halfdiff(measure(felt, protocol="dense", step_deg=6))
     rmse, log_rmse = _hemisphere_metrics(felt, model, "halfdiff")  # the kind's one mapping

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from kesbrdf.brdf import evaluate
-from kesbrdf.diagnostics import directional_albedo
+from kesbrdf.models.brdf import evaluate
+from kesbrdf.validate.diagnostics import directional_albedo
 from kesbrdf.geometry import spherical_to_cartesian
 from bsdf_helpers import eval_cos, random_pairs
 
@@ -23,7 +23,7 @@ EVAL_RTOL = 1e-4
 FURNACE_SAMPLES = 400_000
 #: Allowed distance from the numpy albedo in standard errors of the MC mean.
 FURNACE_SIGMAS = 5.0
-#: Quadrature error of kesbrdf.diagnostics.directional_albedo at 1°x1° (relative).
+#: Quadrature error of kesbrdf.validate.diagnostics.directional_albedo at 1°x1° (relative).
 ALBEDO_QUADRATURE_RTOL = 5e-3
 
 
@@ -143,8 +143,8 @@ def test_white_furnace_render(render_module, model_files):
 
 def test_model_with_two_channels_is_rejected_before_mitsuba(render_module, tmp_path):
     from kesbrdf.errors import ModelError
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
     from kesbrdf.render.bsdf import check_model
 

@@ -71,8 +71,8 @@ def test_halfdiff_plugin_agrees_with_numpy(render_module, rng, tmp_path):
     import drjit as dr
     import mitsuba as mi
 
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import evaluate_halfdiff, fit_halfdiff
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import evaluate_halfdiff, fit_halfdiff
     from kesbrdf.references.ward import AnisotropicWard
 
     model = fit_halfdiff(measure(AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1), protocol="dense"))
@@ -100,8 +100,8 @@ def test_chi2_halfdiff_sampling(render_module, tmp_path, monkeypatch, theta):
     import mitsuba as mi
     from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
 
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
     from kesbrdf.references.ward import AnisotropicWard
 
     monkeypatch.chdir(tmp_path)
@@ -146,8 +146,8 @@ def test_halfdiff_fade_changes_only_beyond_the_measured_half_angles(render_modul
     import mitsuba as mi
 
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.gonio import measure
-    from kesbrdf.halfdiff import fit_halfdiff, to_half_diff
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff, to_half_diff
     from kesbrdf.references.ward import AnisotropicWard
 
     model = fit_halfdiff(measure(AnisotropicWard(0.2, 0.4, rho_d=0.1, rho_s=0.3), protocol="dense"))

@@ -42,8 +42,8 @@ def prior_files(tmp_path_factory):
     (filament/filament, KES residual), paper with a staple warp, a coarse dense grid (15°)
     with a staple weft (half/difference residual, free θ_d law), and the pure prior of
     the first."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.prior_model import FibrePriorModel
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.fibre_prior import FibrePriorModel
     from kesbrdf.render.reference_bsdf import make_reference
 
     ref = make_reference("sadeghi-satin")
@@ -155,8 +155,8 @@ def test_scenes_draw_a_fibre_prior_file_with_this_plugin(render_module, prior_fi
 
 def test_wrong_kind_is_rejected_in_one_line(render_module, tmp_path):
     from kesbrdf.errors import ModelError
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.ward import AnisotropicWard
     from kesbrdf.render.prior_bsdf import check_prior_model
 

@@ -17,8 +17,8 @@ VALUE_ATOL = 1e-6
 @pytest.fixture(scope="module")
 def black_satin_model(tmp_path_factory):
     """The KES model of the virtual black satin (paper protocol, as the demo fits it)."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
     from kesbrdf.references.sadeghi2013 import black_satin
 
     path = tmp_path_factory.mktemp("satin") / "black_satin.kes.json"
@@ -34,7 +34,7 @@ def _pairs(rng, n=2000):
 
 
 def test_colourways_change_the_body_only(render_module, black_satin_model, rng):
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.render.colourways import DEFAULT_COLOURWAYS, colourway_values
 
     path, model = black_satin_model
@@ -52,7 +52,7 @@ def test_colourways_change_the_body_only(render_module, black_satin_model, rng):
 
 def test_black_colourway_is_the_measured_black_body(render_module, black_satin_model, rng):
     """Without a base colour the body is the measured one (2 % albedo), not mid-grey."""
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.render.colourways import DEFAULT_COLOURWAYS, colourway_values
 
     path, model = black_satin_model
@@ -142,7 +142,7 @@ def test_fade_extrapolation_changes_only_the_unmeasured_deviations(render_module
     import drjit as dr
     import mitsuba as mi
 
-    from kesbrdf.brdf import to_phi_gamma
+    from kesbrdf.models.brdf import to_phi_gamma
     from kesbrdf.render.bsdf import FADE_DEG
 
     path, model = black_satin_model

@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 from kesbrdf.cli.main import main as cli_main
-from kesbrdf.demo_data import embedded_measurement
+from kesbrdf.measure.demo_data import embedded_measurement
 from kesbrdf.io.measurement_csv import read_measurement
-from kesbrdf.model import fit
+from kesbrdf.models.kes import fit
 from kesbrdf.viewer.server import STATIC_DIR, make_server
 
 #: Upload limit of the servers under test: small, so oversize bodies are cheap to send.

@@ -10,10 +10,10 @@ import time
 
 import pytest
 
-from kesbrdf.demo_data import embedded_measurement
+from kesbrdf.measure.demo_data import embedded_measurement
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.io.text import MAX_LINE_CHARS
-from kesbrdf.model import load
+from kesbrdf.models.kes import load
 from kesbrdf.viewer import server as server_module
 from kesbrdf.viewer.server import MAX_FIT_CHANNELS, ModelStore, ViewerLimits, make_server
 

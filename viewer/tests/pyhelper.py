@@ -5,7 +5,7 @@
         OUTDIR/bad.csv (text in a numeric field), OUTDIR/big.csv (over the upload
         limit given by --limit) and OUTDIR/model/ward.kes.json fitted from good.csv.
     python pyhelper.py reference MODEL OUT.json
-        seeded direction pairs and f_r from kesbrdf.brdf.evaluate for every mapping,
+        seeded direction pairs and f_r from kesbrdf.models.brdf.evaluate for every mapping,
         the numbers the GLSL shader must reproduce.
 """
 
@@ -82,7 +82,7 @@ def write_fixtures(out: Path, limit: int) -> None:
 def fit_model(csv: Path, target: Path) -> None:
     try:
         from kesbrdf.io.measurement_csv import read_measurement
-        from kesbrdf.model import fit
+        from kesbrdf.models.kes import fit
     except ImportError:
         return synthetic_model(target)
     fit(read_measurement(csv)).save(target)
@@ -95,7 +95,7 @@ def _arr(a) -> dict:
 
 def synthetic_model(target: Path) -> None:
     """A model file per docs/formats.md with an asymmetric lobe (no Ward symmetries),
-    also used for ward.kes.json while kesbrdf.model is not installed."""
+    also used for ward.kes.json while kesbrdf.models.kes is not installed."""
     n_phi, n_gamma = 72, 29
     phi = np.arange(n_phi) * 2 * np.pi / n_phi
     gamma = np.linspace(0, np.radians(84), n_gamma)
@@ -133,7 +133,7 @@ def _decode(a) -> np.ndarray:
 
 
 def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
-    """docs/formats.md 'How to evaluate a model', used only when kesbrdf.brdf is absent
+    """docs/formats.md 'How to evaluate a model', used only when kesbrdf.models.brdf is absent
     (parameters.normalisation / extrapolation as there: absent means sqrtcos / hold)."""
     arrays = doc["arrays"]
     table, body = _decode(arrays["table"]), _decode(arrays["body"])
@@ -209,15 +209,15 @@ def reference(model_path: Path, out: Path) -> None:
     # exact mirror pairs: wr.xy = -wi.xy bit for bit
     wr[-4:] = wi[-4:] * np.array([-1.0, -1.0, 1.0])
     try:
-        from kesbrdf.brdf import evaluate
-        from kesbrdf.model import load
+        from kesbrdf.models.brdf import evaluate
+        from kesbrdf.models.kes import load
 
         model = load(model_path)
-        source = "kesbrdf.brdf.evaluate"
+        source = "kesbrdf.models.brdf.evaluate"
         def f(mapping):
             return np.asarray(evaluate(model, wi, wr, mapping=mapping), float)
     except ImportError:
-        source = "recipe helper (kesbrdf.brdf not installed)"
+        source = "recipe helper (kesbrdf.models.brdf not installed)"
         def f(mapping):
             return recipe_evaluate(doc, wi, wr, mapping)
     result = {"source": source, "channels": doc["channels"], "pairs": [], "values": {}}

@@ -235,8 +235,8 @@ async function main() {
     });
 
     await test('a model file with an unknown normalisation or extrapolation is refused', async () => {
-      // the Python reader refuses these (kesbrdf.model.Model.from_payload); shading them
-      // the old way would disagree with kesbrdf.brdf.evaluate silently
+      // the Python reader refuses these (kesbrdf.models.kes.Model.from_payload); shading them
+      // the old way would disagree with kesbrdf.models.brdf.evaluate silently
       for (const [key, value] of [['normalisation', 'cosine'], ['extrapolation', 'mirror']]) {
         const message = await page.evaluate(([doc, k, v]) => {
           try {

@@ -1,7 +1,7 @@
 """A synthetic fabric library (``kesbrdf simulate --library N -o DIR``).
 
 N varied fabrics measured with the virtual gonioreflectometer
-(:func:`kesbrdf.gonio.measure`) from the physically based references, with randomised
+(:func:`kesbrdf.measure.gonio.measure`) from the physically based references, with randomised
 parameters (one NumPy generator seeded by ``seed``, so a library is reproducible):
 
 * ``sadeghi:<preset>``: the Sadeghi et al. 2013 microcylinder presets (Table II:
@@ -12,7 +12,7 @@ parameters (one NumPy generator seeded by ``seed``, so a library is reproducible
 
 Every fabric gets 1 % relative noise.  Every ``images_every``-th fabric is
 photographed instead (camera frames + acquisition manifest through the virtual camera,
-:func:`kesbrdf.acquisition.camera.simulate_images`), so the batch's ingest step sees
+:func:`kesbrdf.measure.acquisition.camera.simulate_images`), so the batch's ingest step sees
 both kinds of input.  ``broken`` deliberately broken fabrics are appended, cycling
 through :data:`BROKEN`: a measurement file with a non-numeric value, one missing the
 45°–135° orientations, and a catalogue row naming a file that does not exist.
@@ -59,7 +59,7 @@ def simulate_library(n: int, out, seed: int = 0, broken: int = 2, images_every: 
     Returns the catalogue's path.
     """
     from kesbrdf.errors import KesbrdfError
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
     from kesbrdf.io.measurement_csv import format_measurement, write_measurement
 
     if n < 0 or broken < 0:
@@ -75,7 +75,7 @@ def simulate_library(n: int, out, seed: int = 0, broken: int = 2, images_every: 
         ref = make_fabric_reference(name, params)
         sample = f"library {fid}: {name}"
         if images_every and k % images_every == images_every - 1:
-            from kesbrdf.acquisition.camera import simulate_images
+            from kesbrdf.measure.acquisition.camera import simulate_images
 
             manifest = simulate_images(ref, out / fid, seed=seed + k, sample=sample)
             inp = manifest.relative_to(out).as_posix()

@@ -119,7 +119,7 @@ def make_fabric_reference(name: str | None, params: dict | None = None):
         from kesbrdf.references import sadeghi2013
 
         return sadeghi2013.Sadeghi2013(preset=name.split(":", 1)[1], **(params or {}))
-    from kesbrdf.cli._common import make_reference
+    from kesbrdf.references.registry import make_reference
 
     return make_reference(name, json.dumps(params) if params else None)
 
@@ -163,7 +163,7 @@ def input_files(path: Path) -> list[Path]:
     """Every file the ingest step reads: the input, and a manifest's frames."""
     if not is_manifest(path):
         return [path]
-    from kesbrdf.acquisition.manifest import read_manifest
+    from kesbrdf.measure.acquisition.manifest import read_manifest
 
     man = read_manifest(path)
     return [path, *sorted({row.path for row in man.rows})]
@@ -175,7 +175,7 @@ def step_ingest(inputs: dict, params: dict, out: Path) -> dict:
 
     src = Path(inputs["input"])
     if is_manifest(src):
-        from kesbrdf.acquisition.ingest import ingest
+        from kesbrdf.measure.acquisition.ingest import ingest
         from kesbrdf.io.measurement_csv import write_measurement
 
         res = ingest(src, saturation=params.get("saturation", "reject"))
@@ -210,7 +210,7 @@ def _read_m(inputs):
 
 
 def _load_model(inputs):
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     return load(inputs["fit/model.kes.json"])
 
@@ -230,7 +230,7 @@ def step_fit(inputs: dict, params: dict, out: Path) -> dict:
 
 
 def step_validate(inputs: dict, params: dict, out: Path) -> dict:
-    from kesbrdf.validation import HELD_OUT_DEG, leave_one_orientation_out, validate
+    from kesbrdf.validate.compare import HELD_OUT_DEG, leave_one_orientation_out, validate
 
     m = _read_m(inputs)
     model = _load_model(inputs)
@@ -248,7 +248,7 @@ def step_validate(inputs: dict, params: dict, out: Path) -> dict:
         result["loo_nrmse"] = _finite(max(errs)) if errs else None
     ref = make_fabric_reference(params.get("reference"), params.get("reference_params"))
     if ref is not None:
-        from kesbrdf.gonio import measure
+        from kesbrdf.measure.gonio import measure
 
         protocol = "dense" if '"protocol": "dense"' in str(m.metadata.get("generator", "")) else "paper"
         held = measure(ref, protocol=protocol, orientations_deg=HELD_OUT_DEG)

@@ -23,9 +23,9 @@ def default_vs_baselines(m, reference, model, report, say) -> dict:
     Returns ``{"table": compare_models(...), "verdicts": [...], "headline": one line,
     "prior_model": model}``.
     """
-    from kesbrdf.baselines import compare_models, verdicts
-    from kesbrdf.model import fit as kes_fit
-    from kesbrdf.prior_model import FibrePriorModel
+    from kesbrdf.validate.baselines import compare_models, verdicts
+    from kesbrdf.models.kes import fit as kes_fit
+    from kesbrdf.models.fibre_prior import FibrePriorModel
 
     say("default model vs baselines (nearest, linear over phi) and the fibre-prior candidates")
     prior_res = FibrePriorModel.fit_measurement(m)
@@ -63,9 +63,9 @@ def headline(table, model, report) -> str:
 
 
 def small_plan(reference, say) -> dict:
-    """:func:`kesbrdf.planning.plan` for the demo's reference on three protocols."""
+    """:func:`kesbrdf.measure.planning.plan` for the demo's reference on three protocols."""
     import kesbrdf
-    from kesbrdf.planning import PROTOCOLS, plan
+    from kesbrdf.measure.planning import PROTOCOLS, plan
 
     say("plan: expected hemisphere error of the paper protocol and two extensions")
     result = plan({"black satin": reference}, budget=200,

@@ -2,13 +2,13 @@
 
 ``kesbrdf simulate`` measures a reference, ``kesbrdf convert`` and ``kesbrdf fit``
 sample a BRDF table (RGL ``.bsdf``, MERL ``.binary``); all three go through
-:func:`kesbrdf.gonio.measure` with the same ``--protocol``, ``--step-deg`` and
+:func:`kesbrdf.measure.gonio.measure` with the same ``--protocol``, ``--step-deg`` and
 ``--orientations-deg``.
 """
 
 from __future__ import annotations
 
-from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
+from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG
 
 PAPER_ORIENTATIONS_TEXT = ",".join(f"{v:g}" for v in PAPER_ORIENTATIONS_DEG)
 

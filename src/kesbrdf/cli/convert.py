@@ -2,7 +2,7 @@
 
 CUReT samples become a general-geometry CSV (their own 205 configurations); RGL
 ``.bsdf`` and MERL ``.binary`` tables are sampled at a protocol's geometries by the
-virtual gonioreflectometer (:func:`kesbrdf.gonio.measure`, as ``kesbrdf simulate``); a
+virtual gonioreflectometer (:func:`kesbrdf.measure.gonio.measure`, as ``kesbrdf simulate``); a
 measurement CSV is read, checked and written back.  The result is what ``kesbrdf fit``
 would fit, so it can be inspected, edited or plotted first.
 """

@@ -82,10 +82,10 @@ class _Stages:
 
 def run(args) -> int:
     import kesbrdf
-    from kesbrdf import demo_data
-    from kesbrdf.diagnostics import diagnose
+    from kesbrdf.measure import demo_data
+    from kesbrdf.validate.diagnostics import diagnose
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
-    from kesbrdf.validation import compare_reference, leave_one_orientation_out, validate
+    from kesbrdf.validate.compare import compare_reference, leave_one_orientation_out, validate
     from kesbrdf._atomic import write_bytes, write_text
 
     out = check_output(args.output, folder=True)
@@ -96,7 +96,7 @@ def run(args) -> int:
     meas_path = out / "measurement.csv"
     manifest = demo_data.embedded_manifest()
     if manifest is not None:
-        from kesbrdf.acquisition.ingest import ingest
+        from kesbrdf.measure.acquisition.ingest import ingest
 
         say(f"ingest: camera frames of {manifest.parent.name} -> calibrated reflectance")
         result = ingest(manifest)

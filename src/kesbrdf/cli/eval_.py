@@ -26,9 +26,9 @@ def add_arguments(p):
 
 def run(args) -> int:
     from kesbrdf._atomic import write_text
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     check_output(args.output, (".csv",))
     model = load(args.model)
@@ -39,7 +39,7 @@ def run(args) -> int:
     wr = spherical_to_cartesian(rad[:, 2], rad[:, 3])
     sigma = None
     if args.uncertainty:
-        from kesbrdf.uncertainty import predict_sigma
+        from kesbrdf.validate.uncertainty import predict_sigma
 
         f, sigma, _ = predict_sigma(model, wi, wr, source=args.model)
     else:

@@ -20,7 +20,7 @@ HELP = ("Fit a model to a measurement CSV, CUReT abrdf.dat, RGL .bsdf or MERL .b
 
 def add_arguments(p):
     from kesbrdf.cli._protocol import add_protocol_arguments
-    from kesbrdf.kinds import known_fitters
+    from kesbrdf.models.base import known_fitters
 
     p.add_argument("measurement", metavar="INPUT",
                    help="measurement CSV, CUReT abrdf.dat (table.txt beside it; --sample), RGL .bsdf or MERL "

@@ -1,6 +1,6 @@
 """``kesbrdf ingest MANIFEST.csv -o MEAS.csv``: camera frames -> measurement CSV.
 
-Reads the manifest's frames, calibrates them (:func:`kesbrdf.acquisition.ingest.ingest`),
+Reads the manifest's frames, calibrates them (:func:`kesbrdf.measure.acquisition.ingest.ingest`),
 writes the measurement atomically and prints a summary of the frames used, flagged
 and rejected.  When any frame is rejected, the rejected frames are listed on stderr,
 the first problem is reported on one line, nothing is written and the exit code is 2.
@@ -61,7 +61,7 @@ def run(args) -> int:
     from rich.console import Console
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from kesbrdf.acquisition.ingest import IngestError, ingest
+    from kesbrdf.measure.acquisition.ingest import IngestError, ingest
     from kesbrdf.io.measurement_csv import write_measurement
 
     saturation = args.saturation.replace("-", "_")

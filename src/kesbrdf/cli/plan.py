@@ -42,8 +42,8 @@ def run(args) -> int:
     for name in (REFERENCES if args.library else args.reference):
         truths[name] = make_reference(name)
     for path in args.model:
-        from kesbrdf.brdf import evaluate
-        from kesbrdf.model import load
+        from kesbrdf.models.brdf import evaluate
+        from kesbrdf.models.kes import load
 
         model = load(path)
 
@@ -54,7 +54,7 @@ def run(args) -> int:
         truths[Path(path).name] = as_truth
     if not truths:
         raise KesbrdfError("plan: expected --reference NAME, --model FILE or --library, got none")
-    from kesbrdf.planning import fitter, plan
+    from kesbrdf.measure.planning import fitter, plan
 
     fit = fitter(args.kind)
     result = plan(truths, budget=args.budget, noise=args.noise, fit=fit, progress=lambda msg: stderr(f"plan: {msg}"))

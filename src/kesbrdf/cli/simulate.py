@@ -32,7 +32,7 @@ def run(args) -> int:
     if getattr(args, "library", None) is not None:
         return _run_library(args)
     from kesbrdf.errors import KesbrdfError
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
     from kesbrdf.io.measurement_csv import write_measurement
 
     check_output(args.output, (".csv",))
@@ -43,8 +43,8 @@ def run(args) -> int:
     orientations_deg = orientations(args.orientations_deg)
     reference = make_reference(args.reference, args.params)
     if args.images:
-        from kesbrdf.acquisition.camera import simulate_images
-        from kesbrdf.acquisition.sensor import Sensor
+        from kesbrdf.measure.acquisition.camera import simulate_images
+        from kesbrdf.measure.acquisition.sensor import Sensor
 
         manifest = simulate_images(
             reference,

@@ -20,8 +20,8 @@ def add_arguments(p):
 def run(args) -> int:
     from kesbrdf._atomic import write_text
     from kesbrdf.io.measurement_csv import read_measurement
-    from kesbrdf.model import load
-    from kesbrdf.validation import validate
+    from kesbrdf.models.kes import load
+    from kesbrdf.validate.compare import validate
 
     if args.json_out:
         check_output(args.json_out, (".json",), "--json")
@@ -31,13 +31,13 @@ def run(args) -> int:
     args.mapping = result["mapping"]
     result.update({"model": args.model, "measurement": args.measurement, "measurement_sha256": m.sha256})
     print_metrics(result, title=f"{args.model} vs {args.measurement} ({args.mapping})")
-    from kesbrdf.uncertainty import coverage, has_uncertainty, predict_sigma
+    from kesbrdf.validate.uncertainty import coverage, has_uncertainty, predict_sigma
 
     if has_uncertainty(model):
         wi, wr = m.wi, m.wr
         warp = getattr(model, "sample_frame_warp", 0.0)
         if warp:  # fitted in a sample frame: evaluate as validate() does
-            from kesbrdf.scattered import to_fabric_frame
+            from kesbrdf.models.scattered import to_fabric_frame
 
             wi, wr = to_fabric_frame(wi, warp), to_fabric_frame(wr, warp)
         pred, _, sigma_log = predict_sigma(model, wi, wr, source=args.model)

@@ -81,7 +81,7 @@ _FLAGS = {
 def _limits(args):
     """The server's :class:`ViewerLimits` from the flags (errors name the flag)."""
     from kesbrdf.errors import KesbrdfError, validate_choice
-    from kesbrdf.kinds import known_fitters
+    from kesbrdf.models.base import known_fitters
     from kesbrdf.viewer.limits import MAX_FIT_VALUES, MAX_FIT_VALUES_BY_KIND, ViewerLimits
 
     max_values, by_kind = MAX_FIT_VALUES, dict(MAX_FIT_VALUES_BY_KIND)

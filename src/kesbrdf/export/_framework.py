@@ -149,7 +149,7 @@ def _load_model(model):
         path = Path(model)
         if not path.is_file():
             raise FileNotFoundError(2, "No such file or directory", str(path))
-        from kesbrdf.model import load
+        from kesbrdf.models.kes import load
 
         return load(path)
     return model
@@ -161,7 +161,7 @@ def check_values(model, fmt: str, module=None, source=None) -> None:
     The model's arrays must hold what a model file may hold (finite, magnitude at most
     :data:`kesbrdf.io.text.MAX_ABS_NUMBER`, NaN only where the kind allows it: the
     checks of :func:`kesbrdf.io.model_file.model_from_dict`), and its largest f_r —
-    at most (largest tabulated value) / :data:`kesbrdf.mappings.COS_EPS`, reached at
+    at most (largest tabulated value) / :data:`kesbrdf.models.mappings.COS_EPS`, reached at
     grazing angles — must fit the format's ``VALUE_MAX`` (default :data:`VALUE_MAX`).
     Objects that are not model kinds (a reference BRDF given to an analytic fit) pass.
 
@@ -173,7 +173,7 @@ def check_values(model, fmt: str, module=None, source=None) -> None:
     import numpy as np
 
     from kesbrdf.errors import ModelError
-    from kesbrdf.mappings import COS_EPS
+    from kesbrdf.models.mappings import COS_EPS
 
     if not hasattr(model, "to_payload"):
         return
@@ -203,7 +203,7 @@ def export(model, fmt: str, out, **options) -> ExportResult:
     Parameters
     ----------
     model : ReflectanceModel or path
-        A fitted model (any kind :func:`kesbrdf.brdf.evaluate` accepts) or a model file.
+        A fitted model (any kind :func:`kesbrdf.models.brdf.evaluate` accepts) or a model file.
     fmt : str
         A key of :data:`kesbrdf.export.FORMATS`.
     out : str or Path

@@ -234,7 +234,7 @@ def target_function(target) -> Callable:
     """A callable f(wi, wr) -> (N, C) for a kesbrdf model or any BRDF callable."""
     if callable(target) and not hasattr(target, "table") and not hasattr(target, "kind"):
         return target
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     return lambda wi, wr: evaluate(target, wi, wr)
 

@@ -4,7 +4,7 @@ Disney's BRDF Explorer (github.com/wdas/brdf) reads "analytic" files: a paramete
 block and a GLSL function ``vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)`` that
 it pastes into its own shader templates (``#version 410``, one ``uniform`` per
 parameter at ``::INSERT_UNIFORMS_HERE::``).  The function written here evaluates the
-extended-KES model exactly as :func:`kesbrdf.brdf.evaluate` does (docs/formats.md,
+extended-KES model exactly as :func:`kesbrdf.models.brdf.evaluate` does (docs/formats.md,
 "How to evaluate a model"): (φ, γ) by the deviation or half-vector mapping, bilinear
 lookup of the table q (periodic in φ, γ clamped), f_r = c + fade(γ)·q/w with the
 foreshortening weight w and the fade beyond the last measured γ that the model file's
@@ -37,7 +37,7 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
-from kesbrdf.mappings import BOUNDED_LAMBDA, EXTRAPOLATIONS, FADE_DEG, NORMALISATIONS
+from kesbrdf.models.mappings import BOUNDED_LAMBDA, EXTRAPOLATIONS, FADE_DEG, NORMALISATIONS
 
 __all__ = ["export", "brdf_explorer_source", "resample_table", "lobe_parameters", "glsl_function", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
 
@@ -96,7 +96,7 @@ def resample_table(model, n_phi: int, n_gamma: int):
     table : ndarray, shape (n_phi, n_gamma, 3)
     d_gamma : float
     """
-    from kesbrdf.brdf import lookup
+    from kesbrdf.models.brdf import lookup
 
     phi = np.arange(n_phi) * (2 * np.pi / n_phi)
     gamma = np.linspace(0.0, model.gamma_max, n_gamma)
@@ -278,7 +278,7 @@ color tint 1 1 1
 
 def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, seed: int = 20261201, max_theta_deg: float = 80.0) -> dict:
     """Relative error of the resampled table's f_r against the full model at random pairs."""
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     table, d_gamma = resample_table(model, n_phi, n_gamma)
     rng = np.random.default_rng(seed)

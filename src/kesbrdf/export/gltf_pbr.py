@@ -58,7 +58,7 @@ SHEEN_ROUGHNESS_MIN = 0.1
 ROUGHNESS_MIN = 0.02
 #: The dielectric's index of refraction where the fit starts (and the value of a
 #: parameter set without ``ior``): both the glTF default and the refractive index of
-#: textile fibres (η ≈ 1.5, ``kesbrdf.prior.THETA_D_ETA``; a test keeps them equal).
+#: textile fibres (η ≈ 1.5, ``kesbrdf.models.fibre_physics.THETA_D_ETA``; a test keeps them equal).
 #: The fit moves it within :data:`~kesbrdf.export.analytic_fit.FIBRE_IOR_RANGE` and
 #: writes it as ``KHR_materials_ior``; ``specularColorFactor`` ≤ 1 tints the F0 it gives.
 IOR = 1.5

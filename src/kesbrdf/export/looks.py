@@ -294,7 +294,7 @@ def _render_mitsuba(scene: dict, fabric_bsdf: dict, opts: LookOptions, seed: int
 
 
 #: The plugin's lobe beyond the last measured deviation for the reference render: None,
-#: the model file's own setting, i.e. the model as :func:`kesbrdf.brdf.evaluate` gives it
+#: the model file's own setting, i.e. the model as :func:`kesbrdf.models.brdf.evaluate` gives it
 #: and as every export encodes it (``kesbrdf render`` may override it; no export carries
 #: an override).
 REFERENCE_EXTRAPOLATION = None

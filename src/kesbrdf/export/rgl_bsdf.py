@@ -7,7 +7,7 @@ The file stores, per incident direction ω_i on a (φ_i, θ_i) grid, the ratio
 .. math:: T(s \mid \omega_i) = \frac{f_r(\omega_i, \omega_o)\cos\theta_o \; 4\sigma(\omega_i)}{D(m)}
 
 on a uniform N × N grid of points s of the *sample space* of the visible-normal
-warp: m = VNDF(s | ω_i) (Marginal2D, :mod:`kesbrdf.marginal2d`), ω_o = reflect(ω_i, m).
+warp: m = VNDF(s | ω_i) (Marginal2D, :mod:`kesbrdf.references.marginal2d`), ω_o = reflect(ω_i, m).
 A reader inverts the warp, interpolates T and multiplies by D/(4σ) (``jacobian`` = 1).
 
 The parameterisation is built from the model itself (Dupuy & Jakob sec. 4–5):
@@ -54,7 +54,7 @@ import numpy as np
 
 from kesbrdf.errors import ExportError
 from kesbrdf.export._framework import ExportResult
-from kesbrdf.marginal2d import Marginal2D
+from kesbrdf.references.marginal2d import Marginal2D
 
 __all__ = ["export", "build_fields", "model_brdf", "agreement", "EXTENSIONS", "HELP", "DEFAULTS"]
 
@@ -96,12 +96,12 @@ def resolve_mapping(model, mapping=None) -> str:
     try:
         return model.default_mapping
     except (AttributeError, IndexError):
-        return "deviation"  # kesbrdf.brdf.evaluate's default; kinds with one mapping ignore it
+        return "deviation"  # kesbrdf.models.brdf.evaluate's default; kinds with one mapping ignore it
 
 
 def model_brdf(model, mapping=None):
     """f(w_light, w_view) -> (n, 3) RGB in 1/sr for a model of 1 or 3 channels."""
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     channels = getattr(model, "channels", ())
     if len(channels) not in (1, 3):
@@ -189,7 +189,7 @@ def build_fields(model, *, n_theta_i=None, n_phi_i=None, n=None, n_ndf=None, flo
     theta_i_max_deg : float
         Last θ_i node (< 90°); beyond it the readers use the last node.
     mapping : str, optional
-        Passed to :func:`kesbrdf.brdf.evaluate`; default the kind's own.
+        Passed to :func:`kesbrdf.models.brdf.evaluate`; default the kind's own.
     vndf : {"microfacet", "model"}
         ``microfacet`` (default): D(m)⟨ω_i, m⟩/σ(ω_i), the luminance = Y of the table
         (Dupuy & Jakob).  ``model``: the model's lobe in half-vector space, luminance 1

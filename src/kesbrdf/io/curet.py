@@ -11,7 +11,7 @@ Two text files make up the BRDF part:
 ``table.txt``
     205 rows ``index theta_v phi_v theta_i phi_i``: the configurations, radians, in the
     *sample* frame (the azimuth zero is where the sample sat on the turntable, not
-    the warp; :func:`kesbrdf.scattered.fit_scattered` estimates the warp azimuth).
+    the warp; :func:`kesbrdf.models.scattered.fit_scattered` estimates the warp azimuth).
 ``abrdf.dat``
     One row per sample: ``sample_number`` followed by 205 BRDF values (RGB-averaged,
     1/sr) in the order of ``table.txt``.  A few values are slightly negative (dark
@@ -19,7 +19,7 @@ Two text files make up the BRDF part:
 
 ``theta_v, phi_v`` is the viewer (our ``theta_r, phi_r``); ``theta_i, phi_i`` the
 light.  Checked on sample 15 (aluminium foil), whose maximum sits at the mirror
-direction γ ≈ 0 of :func:`kesbrdf.brdf.to_phi_gamma`.
+direction γ ≈ 0 of :func:`kesbrdf.models.brdf.to_phi_gamma`.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ import numpy as np
 from kesbrdf.errors import FormatError, MeasurementError, where
 from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import parse_number, split_lines
-from kesbrdf.measurement import Measurement
+from kesbrdf.measure.measurement import Measurement
 
 __all__ = ["read_curet", "FABRICS", "CITATION", "N_CONFIGURATIONS", "sample_name"]
 
@@ -146,7 +146,7 @@ def read_table(table_path):
 
 
 def read_curet(table_path, abrdf_path, sample) -> Measurement:
-    """One CUReT sample as a :class:`~kesbrdf.measurement.Measurement` (general geometry).
+    """One CUReT sample as a :class:`~kesbrdf.measure.measurement.Measurement` (general geometry).
 
     Parameters
     ----------

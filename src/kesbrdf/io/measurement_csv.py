@@ -20,7 +20,7 @@ from kesbrdf._atomic import write_text
 from kesbrdf.errors import FormatError, MeasurementError, validate_choice, where
 from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
-from kesbrdf.measurement import Measurement
+from kesbrdf.measure.measurement import Measurement
 
 __all__ = ["read_measurement", "write_measurement", "QUANTITIES", "FORMAT_VERSION"]
 

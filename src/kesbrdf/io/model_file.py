@@ -3,7 +3,7 @@
 This module handles what every kind shares — the header (``format``,
 ``format_version``, ``kind``), the shared fields (``channels``, ``input``,
 ``parameters``, ``diagnostics``, ``kesbrdf_version``) and the array codec — and looks
-the kind's class up in the registry (:mod:`kesbrdf.kinds`); it knows no model class.
+the kind's class up in the registry (:mod:`kesbrdf.models.base`); it knows no model class.
 The kind's ``from_payload`` checks its own arrays (shapes, grids, values).
 
 No pickle anywhere: ``load_model(save_model(m))`` rebuilds an identical model from
@@ -29,7 +29,7 @@ from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
 from kesbrdf.io.files import open_regular
 from kesbrdf.io.text import MAX_ABS_NUMBER
-from kesbrdf.kinds import kind_class
+from kesbrdf.models.base import kind_class
 
 __all__ = [
     "save_model",

@@ -1,7 +1,7 @@
 """Open any measurement source by path: measurement CSV, CUReT, RGL ``.bsdf``, MERL ``.binary``.
 
 ``kesbrdf fit`` and ``kesbrdf convert`` take one input path; this module says what it is
-and turns it into a :class:`~kesbrdf.measurement.Measurement` (docs/formats.md,
+and turns it into a :class:`~kesbrdf.measure.measurement.Measurement` (docs/formats.md,
 "Inputs kesbrdf reads directly").
 
 Kinds of input (:data:`KINDS`)
@@ -20,7 +20,7 @@ Kinds of input (:data:`KINDS`)
     A MERL ``.binary`` (Matusik et al. 2003), :class:`~kesbrdf.references.merl.MERLBinary`.
 
 The last two are BRDF *tables*, not measurements: they are sampled at the geometries
-of a protocol by the virtual gonioreflectometer (:func:`kesbrdf.gonio.measure`, the code
+of a protocol by the virtual gonioreflectometer (:func:`kesbrdf.measure.gonio.measure`, the code
 ``kesbrdf simulate`` uses), so a database material is "measured" exactly as a fabric
 would be.  The rows are labelled ``simulated: true`` (the geometry is virtual) and carry
 the table's file name and sha256 in ``resampled_from``.
@@ -206,7 +206,7 @@ def _table_sample_name(brdf, path: Path) -> str:
 
 def read_source(path, *, sample=None, protocol: str | None = None, step_deg: float | None = None,
                 orientations_deg=None):
-    """A :class:`~kesbrdf.measurement.Measurement` from any input kind (module docstring).
+    """A :class:`~kesbrdf.measure.measurement.Measurement` from any input kind (module docstring).
 
     Parameters
     ----------
@@ -215,7 +215,7 @@ def read_source(path, *, sample=None, protocol: str | None = None, step_deg: flo
     sample : int or str, optional
         CUReT only, and required there: the sample number or fabric name.
     protocol, step_deg, orientations_deg : optional
-        BRDF tables only: the geometries they are sampled at (:func:`kesbrdf.gonio.measure`;
+        BRDF tables only: the geometries they are sampled at (:func:`kesbrdf.measure.gonio.measure`;
         default the paper's protocol and orientations).
 
     Returns
@@ -251,8 +251,8 @@ def read_source(path, *, sample=None, protocol: str | None = None, step_deg: flo
         number = curet_sample(sample)
         table, data = curet_files(path)
         return read_curet(table, data, number)
-    from kesbrdf.gonio import measure
-    from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG
 
     brdf = reference_from_file(path)
     m = measure(

@@ -5,8 +5,8 @@ Two layers (STYLE "Plots, CLI, renders"):
 * ``plot_<what>(ax, ...) -> Axes`` draw **computed arrays** on one axes; they do no
   model math and label every axis with its symbol and unit.
 * ``figure_<n>(model=..., measurement=..., reference=...) -> Figure`` compute those
-  arrays through the core API (:func:`kesbrdf.brdf.evaluate`,
-  :func:`kesbrdf.brdf.lookup`, :class:`kesbrdf.measurement.Measurement`) and return a
+  arrays through the core API (:func:`kesbrdf.models.brdf.evaluate`,
+  :func:`kesbrdf.models.brdf.lookup`, :class:`kesbrdf.measure.measurement.Measurement`) and return a
   pyplot-free :class:`matplotlib.figure.Figure` carrying its provenance
   (see :mod:`kesbrdf.plotting.save`).
 
@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
-from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
+from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG
 from kesbrdf.plotting._mpl import new_figure, require_matplotlib
 from kesbrdf.plotting.save import attach_provenance, provenance
 
@@ -570,13 +570,13 @@ def model_in_plane(model, psi, gamma, mapping: str | None = None) -> np.ndarray:
     psi, gamma : array_like
         Radians, broadcast together; |γ| < π/2.
     mapping : str
-        Passed to :func:`kesbrdf.brdf.evaluate`.
+        Passed to :func:`kesbrdf.models.brdf.evaluate`.
 
     Returns
     -------
     ndarray, shape (..., C)
     """
-    from kesbrdf import brdf
+    from kesbrdf.models import brdf
     from kesbrdf.geometry import in_plane_directions
 
     psi, gamma = np.broadcast_arrays(np.asarray(psi, float), np.asarray(gamma, float))
@@ -830,7 +830,7 @@ def figure_5(model=None, measurement=None, reference=None, *, gamma_deg=None, ch
     -------
     Figure
     """
-    from kesbrdf import brdf
+    from kesbrdf.models import brdf
 
     _require(model, "model", "5")
     if gamma_deg is None:
@@ -892,7 +892,7 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
              difference: str = "log", scale: str = "log", figsize=None):
     """Paper Fig. 6: hemispherical maps of f_r over the viewing hemisphere for fixed lights.
 
-    One row per light: the model (:func:`kesbrdf.brdf.evaluate` with ``mapping``), the
+    One row per light: the model (:func:`kesbrdf.models.brdf.evaluate` with ``mapping``), the
     truth and their difference.  The truth is the reference map when a reference
     (any callable ``f(wi, wr) -> (..., C)``) is given; measured samples whose light is
     within :data:`LIGHT_TOL_DEG` of the row's light are drawn on it as dots (or alone,
@@ -925,7 +925,7 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
     """
     if model is not None:
         mapping = model.check_mapping(mapping)  # None: the kind's own (deviation for kes)
-    from kesbrdf import brdf
+    from kesbrdf.models import brdf
     from kesbrdf.geometry import spherical_to_cartesian
 
     _require(model, "model", "6")
@@ -1006,7 +1006,7 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
 
 
 def figure_albedo(model=None, measurement=None, reference=None, *, diagnostics=None, figsize=(6.0, 4.4)):
-    """Directional albedo over incident directions from :func:`kesbrdf.diagnostics.diagnose`.
+    """Directional albedo over incident directions from :func:`kesbrdf.validate.diagnostics.diagnose`.
 
     Parameters
     ----------
@@ -1020,7 +1020,7 @@ def figure_albedo(model=None, measurement=None, reference=None, *, diagnostics=N
     Figure
     """
     if diagnostics is None:
-        from kesbrdf.diagnostics import diagnose
+        from kesbrdf.validate.diagnostics import diagnose
 
         diagnostics = diagnose(_require(model, "model", "albedo"))
     grid = _albedo_grid(diagnostics)
@@ -1079,7 +1079,7 @@ def make_figure(name: str, model=None, measurement=None, reference=None, **kwarg
     if name not in builders:
         raise KesbrdfError(f"expected a figure in {', '.join(builders)}, got {name!r}")
     if model is not None:
-        from kesbrdf.kinds import require_kind
+        from kesbrdf.models.base import require_kind
 
         require_kind(model, FIGURE_KINDS[name], f"figure {name}")
         if name in ("3a", "3b", "4", "6"):  # the figures that evaluate the model

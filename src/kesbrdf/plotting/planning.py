@@ -14,7 +14,7 @@ def plot_plan(ax, result: dict):
     ----------
     ax : matplotlib Axes
     result : dict
-        :meth:`kesbrdf.planning.PlanResult.to_dict`.
+        :meth:`kesbrdf.measure.planning.PlanResult.to_dict`.
     """
     for name, p in result["protocols"].items():
         if p.get("over_budget"):

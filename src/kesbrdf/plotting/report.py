@@ -3,7 +3,7 @@
 The report is a single file: figures are embedded as base64 PNG (``data:`` URIs), the
 style sheet is inline, and nothing refers to an external URL, so it can be mailed or
 archived as it is.  Metrics and diagnostics are plain dicts of numbers, strings and
-lists (what :mod:`kesbrdf.validation` and :mod:`kesbrdf.diagnostics` return, or JSON
+lists (what :mod:`kesbrdf.validate.compare` and :mod:`kesbrdf.validate.diagnostics` return, or JSON
 read back); the report renders whatever they hold:
 
 * a dict whose values are all dicts of scalars becomes one table (rows = outer keys,
@@ -531,7 +531,7 @@ def write_report(
         Any nested dict of numbers/strings/lists, e.g. ``{"round_trip": validate(...),
         "leave_one_orientation_out": ..., "reference": compare_reference(...)}``.
     diagnostics : dict, optional
-        e.g. :func:`kesbrdf.diagnostics.diagnose` output; its albedo grid gives a figure.
+        e.g. :func:`kesbrdf.validate.diagnostics.diagnose` output; its albedo grid gives a figure.
     title : str
     figures : sequence of str
         Figure names (:data:`REPORT_FIGURES`); a figure whose inputs are missing is
@@ -546,9 +546,9 @@ def write_report(
         Reference-vs-model render panels to embed (``panel`` path + numbers, as returned
         by :func:`kesbrdf.render.compare.compare_render`); missing panels are skipped.
     plan : dict, optional
-        :meth:`kesbrdf.planning.PlanResult.to_dict`: drawn as the protocol-planning plot.
+        :meth:`kesbrdf.measure.planning.PlanResult.to_dict`: drawn as the protocol-planning plot.
     baselines : dict, optional
-        :func:`kesbrdf.baselines.compare_models` (+ ``verdicts``): the default-vs-baselines table.
+        :func:`kesbrdf.validate.baselines.compare_models` (+ ``verdicts``): the default-vs-baselines table.
     prior_model : FibrePriorModel, optional
         A fibre-prior model shown beside ``model``: its Fig. 6 and uncertainty map.
         The model comparison table (``model.diagnostics["fit_report"]["comparison"]``)
@@ -578,8 +578,8 @@ def _matplotlib_version() -> str | None:
 
 
 def collect(model, measurement=None, reference=None, mapping: str | None = None) -> tuple[dict, dict]:
-    """Compute the report's metrics and diagnostics with :mod:`kesbrdf.validation` and
-    :mod:`kesbrdf.diagnostics`.
+    """Compute the report's metrics and diagnostics with :mod:`kesbrdf.validate.compare` and
+    :mod:`kesbrdf.validate.diagnostics`.
 
     Returns
     -------
@@ -589,8 +589,8 @@ def collect(model, measurement=None, reference=None, mapping: str | None = None)
         baselines against the reference), each present when its inputs are; a step
         that fails on these inputs records its one-line error instead.
     """
-    from kesbrdf import diagnostics as diag
-    from kesbrdf import validation
+    from kesbrdf.validate import diagnostics as diag
+    from kesbrdf.validate import compare as validation
 
     fit_kwargs = {"fallback": model.parameters.get("fallback", "log")} if model is not None else {}
     if model is not None:

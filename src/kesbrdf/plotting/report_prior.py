@@ -3,11 +3,11 @@
 :func:`sections_html` returns the HTML that :func:`kesbrdf.plotting.report.build_report`
 inserts after the figures:
 
-* **Uncertainty map** (when the model carries a σ, :mod:`kesbrdf.uncertainty`): per
+* **Uncertainty map** (when the model carries a σ, :mod:`kesbrdf.validate.uncertainty`): per
   Fig. 6 light, the model's log10 f_r next to σ of ln f over the viewing hemisphere;
 * **Model comparison** — ``model.diagnostics["fit_report"]["comparison"]``: the held-out
   error of every candidate ``kesbrdf.fit(kind="auto")`` tried and the one it kept;
-* **Default vs baselines** — :func:`kesbrdf.baselines.compare_models` with its verdicts;
+* **Default vs baselines** — :func:`kesbrdf.validate.baselines.compare_models` with its verdicts;
 * **Prior-based model** — Fig. 6 and the uncertainty map of a fibre-prior model;
 * **Protocol planning** — :func:`kesbrdf.plotting.planning.figure_plan`.
 """
@@ -30,16 +30,16 @@ LIGHTS_DEG = ((30.0, 90.0), (30.0, 45.0))
 def figure_uncertainty(model, reference=None, lights_deg=LIGHTS_DEG, n: int = 81, channel: int = 0):
     """Fig. 6 with σ: per light the model's log10 f_r, [the truth, log10(model/truth)], σ of ln f.
 
-    Works for any model that carries a σ (:mod:`kesbrdf.uncertainty`; the paper's
+    Works for any model that carries a σ (:mod:`kesbrdf.validate.uncertainty`; the paper's
     Fig. 6 builder draws only the KES kinds).  σ is
-    :func:`kesbrdf.uncertainty.predict_sigma` (fit noise ⊕ spread to the pure prior and the
+    :func:`kesbrdf.validate.uncertainty.predict_sigma` (fit noise ⊕ spread to the pure prior and the
     stored KES table ⊕ θ_d law ⊕ distance from the measured data, docs/prior.md §5).
     Equal-area disks, x = warp, y = weft; pixels outside are blank.
     """
     from kesbrdf.geometry import spherical_to_cartesian
     from kesbrdf.plotting._mpl import new_figure
     from kesbrdf.plotting.figures import hemisphere_grid
-    from kesbrdf.uncertainty import predict_sigma
+    from kesbrdf.validate.uncertainty import predict_sigma
 
     grid = hemisphere_grid(n, "equal-area")
     wr = spherical_to_cartesian(grid["theta"], grid["phi"]).reshape(-1, 3)
@@ -113,7 +113,7 @@ def comparison_table_html(comparison) -> str:
 
 
 def baselines_html(baselines) -> str:
-    """The default-vs-baselines table and its verdicts (:mod:`kesbrdf.baselines`), or ""."""
+    """The default-vs-baselines table and its verdicts (:mod:`kesbrdf.validate.baselines`), or ""."""
     if not baselines:
         return ""
     cases = baselines["cases"]
@@ -128,7 +128,7 @@ def baselines_html(baselines) -> str:
 def sections_html(model=None, measurement=None, reference=None, plan=None, baselines=None, prior_model=None,
                   dpi: int = 90) -> str:
     """The issue-9 sections (module docstring); each one only when its input is given."""
-    from kesbrdf.uncertainty import has_uncertainty
+    from kesbrdf.validate.uncertainty import has_uncertainty
 
     parts = []
     comparison = ((getattr(model, "diagnostics", None) or {}).get("fit_report") or {}).get("comparison")

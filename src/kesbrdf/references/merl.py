@@ -3,7 +3,7 @@ r"""MERL ``.binary`` isotropic measured BRDFs (Matusik, Pfister, Brand, McMillan
 W. Matusik, H. Pfister, M. Brand and L. McMillan, "A Data-Driven Reflectance Model",
 ACM Trans. Graph. 22(3), 759–769, 2003.  The 100 materials of the MERL database are
 isotropic; a fabric measured with kesbrdf can be compared with them, or a MERL material
-run through :func:`kesbrdf.gonio.measure` like any reference.
+run through :func:`kesbrdf.measure.gonio.measure` like any reference.
 
 Layout (checked against the database's reference reader ``BRDFRead.cpp`` and
 re-implementations of it)::

@@ -174,7 +174,7 @@ class RGLMeasured:
         self._bsdf = load_plugin({"type": "measured", "filename": str(self.path.resolve())})
 
     def params(self) -> dict:
-        """Generator parameters recorded by :func:`kesbrdf.gonio.measure`."""
+        """Generator parameters recorded by :func:`kesbrdf.measure.gonio.measure`."""
         return {
             "reference": "rgl",
             "file": self.path.name,

@@ -6,7 +6,7 @@ parameterising direction ω_p (the plugin's ``si.wi``) and the other direction �
 1. m = normalize(ω_p + ω_o); u(θ) = sqrt(2θ/π), u(φ) = (φ + π)/2π (for isotropic files
    φ_m is taken relative to φ_p);
 2. s = VNDF⁻¹(u_m | φ_p, θ_p), the inverse of the visible-normal warp
-   (:class:`kesbrdf.marginal2d.Marginal2D`, conditioned on (φ_p, θ_p));
+   (:class:`kesbrdf.references.marginal2d.Marginal2D`, conditioned on (φ_p, θ_p));
 3. value = T(s | φ_p, θ_p, λ) · D(u_m) / (4 σ(u_p)) if the file's ``jacobian`` flag is
    set, else T(s | …), with T the stored ``rgb`` or ``spectra`` table (bilinear in s,
    linear in φ_p, θ_p and λ), D the ``ndf`` and σ the ``sigma`` interpolants;
@@ -32,7 +32,7 @@ import numpy as np
 
 from kesbrdf.errors import FormatError, where
 from kesbrdf.io.tensor_file import read_tensor_file
-from kesbrdf.marginal2d import Marginal2D
+from kesbrdf.references.marginal2d import Marginal2D
 
 __all__ = ["RGLTensorBRDF", "REQUIRED_FIELDS"]
 

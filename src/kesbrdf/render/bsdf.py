@@ -1,14 +1,14 @@
 r"""The ``kesbrdf`` BSDF: an extended-KES model file as a Mitsuba 3 plugin.
 
 Evaluation follows ``docs/formats.md`` ("How to evaluate a model") exactly, in
-Dr.Jit (single precision), so it agrees with :func:`kesbrdf.brdf.evaluate`:
+Dr.Jit (single precision), so it agrees with :func:`kesbrdf.models.brdf.evaluate`:
 
 .. math::
 
     f_r(\omega_i, \omega_r) = c + t\,\frac{q(\phi, \gamma)}{w(\theta_i, \theta_r)}
 
 with w the model's foreshortening weight (:func:`foreshortening`, the Dr.Jit twin of
-:func:`kesbrdf.mappings.foreshortening`: √(cos θ_i cos θ_r), bounded toward grazing
+:func:`kesbrdf.models.mappings.foreshortening`: √(cos θ_i cos θ_r), bounded toward grazing
 angles for models with ``normalisation="bounded"``), (φ, γ) from the ``deviation`` or ``halfvector`` mapping (DESIGN §4), q read by
 bilinear lookup (φ periodic, γ clamped to the measured range; a ``mi.Texture2f``
 whose first φ row is repeated after the last, so clamping equals periodic
@@ -32,7 +32,7 @@ filename : str
 mapping : str
     ``deviation`` (default) or ``halfvector``.  ``paper`` is rejected: eq. 3–4 taken
     literally is singular (sin β → 0, grazing angles), not reciprocal, and has no
-    lobe around the mirror direction to sample; use it through :mod:`kesbrdf.brdf`.
+    lobe around the mirror direction to sample; use it through :mod:`kesbrdf.models.brdf`.
 base_color : "r,g,b" or list of 3 floats, optional
     Body albedo in [0, 1].
 lobe_tint : "r,g,b" or list of 3 floats, optional
@@ -46,7 +46,7 @@ sampling : str
 extrapolation : str
     What the lobe does beyond the last measured deviation γ_max (84° in the paper's
     protocol); default: the model's own ``parameters["extrapolation"]``, as
-    :func:`kesbrdf.brdf.evaluate` and ``docs/formats.md`` (``fade`` for new fits, ``hold``
+    :func:`kesbrdf.models.brdf.evaluate` and ``docs/formats.md`` (``fade`` for new fits, ``hold``
     for files written before).  ``hold`` keeps the last column; ``fade`` scales it by
     max(0, 1 − (γ − γ_max)/Δ) with Δ = :data:`FADE_DEG` (one deviation step of the
     paper's protocol), so pairs the measurement never came near get the body only.
@@ -68,8 +68,8 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, validate_choice, where
-from kesbrdf.kinds import require_kind
-from kesbrdf.mappings import BOUNDED_LAMBDA, FADE_DEG  # noqa: F401  (FADE_DEG re-exported)
+from kesbrdf.models.base import require_kind
+from kesbrdf.models.mappings import BOUNDED_LAMBDA, FADE_DEG  # noqa: F401  (FADE_DEG re-exported)
 from kesbrdf.render import sampling as _sampling
 
 __all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "foreshortening", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model", "PLUGINS"]
@@ -80,7 +80,7 @@ SUPPORTED_KINDS = ("kes",)
 SAMPLINGS = ("lobe", "cosine")
 EXTRAPOLATIONS = ("hold", "fade")
 #: Projected length below which the azimuth falls back to the plane of incidence
-#: (float32 counterpart of kesbrdf.brdf.AZIMUTH_EPS).
+#: (float32 counterpart of kesbrdf.models.brdf.AZIMUTH_EPS).
 AZIMUTH_EPS = 1e-7
 
 
@@ -130,7 +130,7 @@ def check_model(path, mapping: str = "deviation"):
     :data:`PLUGINS` is accepted (``model.kind`` says which plugin draws it); ``mapping``
     applies to the ``kes`` kind only.
     """
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     path = Path(path)
     if not path.is_file():
@@ -148,7 +148,7 @@ def check_model(path, mapping: str = "deviation"):
 
 
 def phi_gamma(wi, wr, mapping: str = "deviation"):
-    """(φ, γ) of light ω_i and viewer ω_r in Dr.Jit, as :func:`kesbrdf.mappings.to_phi_gamma`
+    """(φ, γ) of light ω_i and viewer ω_r in Dr.Jit, as :func:`kesbrdf.models.mappings.to_phi_gamma`
     (formats.md step 1); φ ∈ [0, 2π), the plane of incidence ω_r − ω_i where the
     azimuth vector vanishes."""
     plane = wr - wi
@@ -168,7 +168,7 @@ def phi_gamma(wi, wr, mapping: str = "deviation"):
 
 def foreshortening(cos_i, cos_r, normalisation: str = "bounded"):
     """Foreshortening weight w of f_r = c + q/w in Dr.Jit, as
-    :func:`kesbrdf.mappings.foreshortening` (``bounded`` or ``sqrtcos``); callers mask
+    :func:`kesbrdf.models.mappings.foreshortening` (``bounded`` or ``sqrtcos``); callers mask
     pairs below the horizon."""
     g = dr.sqrt(dr.maximum(cos_i * cos_r, 1e-20))
     if normalisation == "sqrtcos":
@@ -181,7 +181,7 @@ class KesTable:
 
     φ is periodic (a ``mi.Texture2f`` whose first φ row is repeated after the last, so
     clamping equals periodic wrapping), γ is clamped to the uniform grid [0, γ_max]:
-    :func:`kesbrdf.model.lookup` in single precision.  Used by the ``kesbrdf`` plugin
+    :func:`kesbrdf.models.kes.lookup` in single precision.  Used by the ``kesbrdf`` plugin
     for the lobe and by the ``kesbrdf_prior`` plugin for the residual.
     """
 
@@ -299,7 +299,7 @@ class KesBSDF(FabricBSDF):
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
-        from kesbrdf.model import load
+        from kesbrdf.models.kes import load
 
         filename = _prop(props, "filename")
         if filename is None:

@@ -4,18 +4,18 @@ model fitted from that reference's virtual measurements, with an error map.
 Chain (one call, :func:`compare_render`):
 
 1. ``ref = make_reference(name)`` (:mod:`kesbrdf.render.reference_bsdf`).
-2. Measure it with the virtual gonioreflectometer, :func:`kesbrdf.gonio.measure`:
+2. Measure it with the virtual gonioreflectometer, :func:`kesbrdf.measure.gonio.measure`:
 
    - ``protocol="paper"``: the paper's 116 in-plane samples (θ_i + θ_r = 90°, 3° steps,
-     ψ = 0, 45, 90, 135°), fitted with :func:`kesbrdf.model.fit` (kind ``kes``) and
+     ψ = 0, 45, 90, 135°), fitted with :func:`kesbrdf.models.kes.fit` (kind ``kes``) and
      rendered by the ``kesbrdf`` plugin (``deviation`` mapping);
    - ``protocol="dense"``: every in-plane (θ_i, θ_r) pair on a 6° grid (900 samples),
-     fitted with :func:`kesbrdf.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
+     fitted with :func:`kesbrdf.models.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
      rendered by the ``kesbrdf_halfdiff`` plugin (:mod:`kesbrdf.render.halfdiff_bsdf`).
 
    Both fits use ``fallback="log"`` (DESIGN §3) and ``body="auto"``.  With
    ``models=("kes", "fibre-prior")`` the same measurement is also fitted with the fibre
-   prior times its residual (:meth:`kesbrdf.prior_model.FibrePriorModel.fit_measurement`,
+   prior times its residual (:meth:`kesbrdf.models.fibre_prior.FibrePriorModel.fit_measurement`,
    kind ``fibre-prior``: a KES residual table on the paper protocol, a half/difference
    one on the dense grid) and rendered by the ``kesbrdf_prior`` plugin
    (:mod:`kesbrdf.render.prior_bsdf`), so each model is scored against the same
@@ -106,7 +106,7 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
     ``measurement`` reuses a measurement of ``ref`` with that protocol.  Returns
     (fitted model, n_samples).
     """
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
 
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
@@ -114,14 +114,14 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
         raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
     m = measurement if measurement is not None else measure(ref, protocol=protocol)
     if model in ("fibre-prior", "prior-only"):
-        from kesbrdf.prior_model import FibrePriorModel
+        from kesbrdf.models.fibre_prior import FibrePriorModel
 
         return FibrePriorModel.fit_measurement(m, residual=model == "fibre-prior"), len(m)
     if protocol == "paper":
-        from kesbrdf.model import fit
+        from kesbrdf.models.kes import fit
 
         return fit(m, fallback="log"), len(m)
-    from kesbrdf.halfdiff import fit_halfdiff
+    from kesbrdf.models.halfdiff import fit_halfdiff
 
     return fit_halfdiff(m, fallback="log"), len(m)
 
@@ -222,7 +222,7 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         ``models``: {name: {"kind", "flip", "rel_rmse"}} for every model; plus the panel
         and JSON paths.
     """
-    from kesbrdf.gonio import measure
+    from kesbrdf.measure.gonio import measure
 
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")

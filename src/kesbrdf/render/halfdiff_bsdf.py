@@ -1,6 +1,6 @@
 r"""The ``kesbrdf_halfdiff`` BSDF: a ``kes-halfdiff`` model file as a Mitsuba 3 plugin.
 
-Evaluation is :func:`kesbrdf.halfdiff.evaluate_halfdiff` in Dr.Jit (single precision):
+Evaluation is :func:`kesbrdf.models.halfdiff.evaluate_halfdiff` in Dr.Jit (single precision):
 
 .. math::
 
@@ -18,7 +18,7 @@ Frames and colour as :mod:`kesbrdf.render.bsdf`: local x = UV-u tangent = warp;
 base_color/π, ``lobe_tint`` multiplies T.
 
 ``extrapolation``: default the model's own ``parameters["extrapolation"]``, as
-:func:`~kesbrdf.halfdiff.evaluate_halfdiff` (``fade`` for new fits, ``hold`` before).
+:func:`~kesbrdf.models.halfdiff.evaluate_halfdiff` (``fade`` for new fits, ``hold`` before).
 ``hold`` keeps the table at the last measured θ_h; ``fade`` scales the lobe by
 max(0, 1 − (θ_h − θ_h,max)/(Δ/2)), Δ = :data:`kesbrdf.render.bsdf.FADE_DEG` (the same
 fade as the ``kesbrdf`` plugin's, in γ = 2θ_h).
@@ -49,7 +49,7 @@ def _prop(props, name, default=None):
 
 def check_halfdiff_model(path):
     """Load a model file and check that it is a ``kes-halfdiff`` model with 1 or 3 channels."""
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     model = load(Path(path))
     if getattr(model, "kind", "kes") != "kes-halfdiff":
@@ -61,7 +61,7 @@ def check_halfdiff_model(path):
 
 def half_diff(wi, wr):
     """(φ_h, θ_h, θ_d) of light ω_i and viewer ω_r in Dr.Jit, as
-    :func:`kesbrdf.mappings.to_half_diff`: h = ω_i + ω_r, φ_h its azimuth (the plane of
+    :func:`kesbrdf.models.mappings.to_half_diff`: h = ω_i + ω_r, φ_h its azimuth (the plane of
     incidence ω_r − ω_i where h ∥ z), θ_h = angle(h, z), θ_d = half the angle ω_i, ω_r."""
     h = wi + wr
     plane = wr - wi
@@ -78,7 +78,7 @@ class HalfDiffTable:
     """A table T(φ_h, θ_h, θ_d), shape (n_phi, n_h, n_d, 3), read trilinearly in Dr.Jit.
 
     φ periodic through a repeated first φ slice of a ``mi.Texture3f``; θ_h and θ_d
-    clamped to their uniform grids: :func:`kesbrdf.halfdiff.lookup_halfdiff` in single
+    clamped to their uniform grids: :func:`kesbrdf.models.halfdiff.lookup_halfdiff` in single
     precision.  Used by the ``kesbrdf_halfdiff`` plugin for the lobe and by the
     ``kesbrdf_prior`` plugin for a dense fit's residual.
     """

@@ -1,6 +1,6 @@
 r"""The ``kesbrdf_prior`` BSDF: a ``fibre-prior`` model file as a Mitsuba 3 plugin.
 
-Evaluation is :meth:`kesbrdf.prior_model.FibrePriorModel.evaluate` in Dr.Jit (single
+Evaluation is :meth:`kesbrdf.models.fibre_prior.FibrePriorModel.evaluate` in Dr.Jit (single
 precision):
 
 .. math::
@@ -8,19 +8,19 @@ precision):
     f_r(\omega_i, \omega_r) = g(\omega_i)\,g(\omega_r)\,f_\text{prior}(\omega_i, \omega_r)\cdot r(\omega_i, \omega_r)^{\tau}
 
 * :math:`f_\text{prior} = k_d + \Phi(\theta_d)\sum_j k_{s,j} S_j` as
-  :func:`kesbrdf.prior.evaluate_batch` (docs/prior.md): a filament family in closed form
+  :func:`kesbrdf.models.fibre_physics.evaluate_batch` (docs/prior.md): a filament family in closed form
   (u* = atan2(h'_y, h'_z), Ā the mean of the Seeliger law over the fixed
-  :data:`kesbrdf.prior.N_V` across-yarn nodes); a staple family as the fixed
-  :data:`kesbrdf.prior.N_U`-node tilt quadrature, a Python loop over the nodes that builds
+  :data:`kesbrdf.models.fibre_physics.N_V` across-yarn nodes); a staple family as the fixed
+  :data:`kesbrdf.models.fibre_physics.N_U`-node tilt quadrature, a Python loop over the nodes that builds
   one Dr.Jit expression (the tilt profile P(u)·Δu of each node is a constant of the
   fitted model, computed once in float64).
 * r is the residual table, read by the lookup code of the other plugins:
   :class:`kesbrdf.render.bsdf.KesTable` over (deviation φ, γ) for a paper-protocol fit,
   divided by the line weight √((cos γ + cos S)/2); :class:`kesbrdf.render.halfdiff_bsdf.HalfDiffTable`
   over (φ_h, θ_h, θ_d) for a dense fit.  The relaxation τ is
-  :data:`kesbrdf.prior_model.RELAX_DEG`'s smoothstep beyond the measured γ (or θ_h),
-  as in :meth:`~kesbrdf.prior_model.FibrePriorModel.residual_ratio`.
-* g is the model's energy scale (:func:`kesbrdf.prior_model.energy_scale`): its table
+  :data:`kesbrdf.models.fibre_prior.RELAX_DEG`'s smoothstep beyond the measured γ (or θ_h),
+  as in :meth:`~kesbrdf.models.fibre_prior.FibrePriorModel.residual_ratio`.
+* g is the model's energy scale (:func:`kesbrdf.models.fibre_prior.energy_scale`): its table
   over cos θ (and φ mod 180° when it has more than one φ node) read (bi)linearly; 1
   for files without one.
 
@@ -83,7 +83,7 @@ def _rgb(a):
 
 def check_prior_model(path):
     """Load a model file and check that it is a ``fibre-prior`` model with 1 or 3 channels."""
-    from kesbrdf.model import load
+    from kesbrdf.models.kes import load
 
     model = load(Path(path))
     if getattr(model, "kind", "kes") != "fibre-prior":
@@ -157,16 +157,16 @@ def _fresnel(c, eta: float):
 
 
 def _frame(w, alpha: float):
-    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.prior's family frame."""
+    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.models.fibre_physics's family frame."""
     s, c = math.sin(alpha), math.cos(alpha)
     return (s * w.x - c * w.y, c * w.x + s * w.y, w.z)
 
 
 class _Prior:
-    """f_prior of a :class:`kesbrdf.prior.FibrePrior` in Dr.Jit (module docstring)."""
+    """f_prior of a :class:`kesbrdf.models.fibre_physics.FibrePrior` in Dr.Jit (module docstring)."""
 
     def __init__(self, prior):
-        from kesbrdf import prior as P
+        from kesbrdf.models import fibre_physics as P
 
         self.P = P
         spec = prior.spec
@@ -220,7 +220,7 @@ class _Prior:
             Bq = hy * cu - hz * su
             D = Bq / (dr.sqrt(hx * hx + A * A) * tpsi)
             v = dr.atan2(-A, hx) + dr.acos(dr.clip(D, -1.0, 1.0))
-            v = dr.select(v > math.pi, v - 2.0 * math.pi, v)  # wrapped as kesbrdf.prior does
+            v = dr.select(v > math.pi, v - 2.0 * math.pi, v)  # wrapped as kesbrdf.models.fibre_physics does
             ok = (dr.abs(D) < 1.0) & (dr.abs(v) < 0.5 * math.pi)
             sv, cv = dr.sin(v), dr.cos(v)
             n = (sv, su * cv, cu * cv)
@@ -251,7 +251,7 @@ class _Residual:
     """r^τ of a fibre-prior model's residual in Dr.Jit (module docstring)."""
 
     def __init__(self, res):
-        from kesbrdf.prior_model import RELAX_DEG
+        from kesbrdf.models.fibre_prior import RELAX_DEG
 
         self.relax = 1.0 / math.radians(RELAX_DEG)
         table = np.clip(np.nan_to_num(_rgb(res.table)), 0.0, None)
@@ -281,7 +281,7 @@ class _Residual:
 
 
 class _EnergyScale:
-    """g(ω) of :func:`kesbrdf.prior_model.energy_scale` in Dr.Jit: bilinear over uniform
+    """g(ω) of :func:`kesbrdf.models.fibre_prior.energy_scale` in Dr.Jit: bilinear over uniform
     cos θ nodes and φ nodes on the half circle (periodic)."""
 
     def __init__(self, energy):

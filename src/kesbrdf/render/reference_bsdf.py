@@ -1,7 +1,7 @@
 r"""Reference BRDFs rendered by Mitsuba 3 themselves (the ground truth of a comparison).
 
 A KES model is fitted from 116 virtual measurements of a reference BRDF
-(:func:`kesbrdf.gonio.measure`).  To judge the model on a picture, the same scene is
+(:func:`kesbrdf.measure.gonio.measure`).  To judge the model on a picture, the same scene is
 rendered with the reference itself; this module makes each reference a Mitsuba BSDF.
 
 * **Analytic references** (:class:`ReferenceBSDF`, plugin name ``kesbrdf_reference``):
@@ -267,8 +267,8 @@ def _prop(props, name, default=None):
 
 def proposal_model(ref):
     """KES model fitted from the reference's paper-protocol measurement (the sampling proposal)."""
-    from kesbrdf.gonio import measure
-    from kesbrdf.model import fit
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
 
     return fit(measure(ref, protocol="paper"), fallback="log")
 

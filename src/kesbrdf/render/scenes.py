@@ -197,7 +197,7 @@ def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
     from kesbrdf.render.bsdf import PLUGINS
 
     if kind is None:
-        from kesbrdf.model import load
+        from kesbrdf.models.kes import load
 
         kind = getattr(load(Path(model_path)), "kind", "kes")
     if kind not in PLUGINS:

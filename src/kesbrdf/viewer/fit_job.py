@@ -187,7 +187,7 @@ def _warm_up() -> None:
     """Load the modules a fit uses (about 1 CPU-s, mostly scipy)."""
     import kesbrdf.fitting  # noqa: F401
     import kesbrdf.io.measurement_csv  # noqa: F401
-    import kesbrdf.model  # noqa: F401
+    import kesbrdf.models.kes  # noqa: F401
     import kesbrdf.viewer.upload  # noqa: F401
 
     try:

@@ -121,7 +121,7 @@ _MODEL_SUFFIXES = (".kes.json",)
 def load_model_json(path: str | os.PathLike) -> dict:
     """Read and check a model file; return its JSON document unchanged.
 
-    Uses :func:`kesbrdf.model.load` for the full check when it is available, so the
+    Uses :func:`kesbrdf.models.kes.load` for the full check when it is available, so the
     error is the one the CLI gives for the same file.
 
     Raises
@@ -131,7 +131,7 @@ def load_model_json(path: str | os.PathLike) -> dict:
     """
     path = Path(path)
     try:
-        from kesbrdf import model as model_module
+        from kesbrdf.models import kes as model_module
     except ImportError:  # core model module not available: the format check below stands
         model_module = None
     if model_module is not None and hasattr(model_module, "load"):

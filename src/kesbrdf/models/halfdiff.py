@@ -1,8 +1,8 @@
 r"""KES over the half-vector azimuth for measurements with several incidence angles.
 
-The ``"kes"`` model (:mod:`kesbrdf.model`) uses one incidence line θ_i + θ_r = 90°,
+The ``"kes"`` model (:mod:`kesbrdf.models.kes`) uses one incidence line θ_i + θ_r = 90°,
 so over the hemisphere it extrapolates by assumption (DESIGN §4).  When every
-orientation was measured at many (θ_i, θ_r) pairs — ``kesbrdf.gonio.measure(ref,
+orientation was measured at many (θ_i, θ_r) pairs — ``kesbrdf.measure.gonio.measure(ref,
 protocol="dense")`` — this module builds the ``"kes-halfdiff"`` model, which keeps
 them all: for a pair (wi, wr) it takes the half vector's azimuth as φ, reads each
 measured orientation's in-plane table at the in-plane pair with the same half and
@@ -20,16 +20,16 @@ and θ_r.  The half vector h = normalize(wi + wr) then lies in the plane of inci
     \qquad \theta_d = \angle(\omega_i, h) = \frac{\theta_i + \theta_r}{2}.
 
 Orientation k (ψ = k·π/4) therefore fills the half-azimuth slots k (θ_r ≥ θ_i) and
-k + 4 (θ_r ≤ θ_i) of :data:`kesbrdf.kes.HALF_AZIMUTHS`; mirror samples (θ_i = θ_r)
+k + 4 (θ_r ≤ θ_i) of :data:`kesbrdf.models.interpolation.HALF_AZIMUTHS`; mirror samples (θ_i = θ_r)
 go to both.  In-plane samples cover the triangle θ_h ≤ θ_d, θ_h + θ_d = max(θ_i, θ_r)
 ≤ θ_max.
 
 How the table is filled
 -----------------------
 1. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
-   samples used (as :func:`kesbrdf.model.fit`), ``"none"`` is c = 0, a number sets c.
+   samples used (as :func:`kesbrdf.models.kes.fit`), ``"none"`` is c = 0, a number sets c.
 2. Normalisation (``normalisation="bounded"``, default): the table holds
-   q = (f_r − c)·w with w the foreshortening weight of :func:`kesbrdf.mappings.foreshortening`,
+   q = (f_r − c)·w with w the foreshortening weight of :func:`kesbrdf.models.mappings.foreshortening`,
    max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)): the paper's eq. 3 quantity, as
    the ``"kes"`` kind uses, bounded toward grazing angles so that the directional albedo
    stays bounded at grazing incidence (docs/decisions.md, "Grazing energy").  In-plane,
@@ -59,14 +59,14 @@ How the table is filled
    (hemisphere RMSE 0.05–0.10 instead of 0.001–0.003 on Ward references).
    Gaps of scattered data outside the convex hull take the nearest sample.
 4. Body back in: at every node the measured quantity Q = lobe + c·w(node) is formed;
-   KES works on it, body included, exactly as :func:`kesbrdf.model.fit` does.  (KES on
+   KES works on it, body included, exactly as :func:`kesbrdf.models.kes.fit` does.  (KES on
    the bare lobe K = 1/(f − c) blows up where the lobe is far below the body:
    hemisphere RMSE 0.22 instead of 0.0012 on Ward α = 0.15/0.3.)
 5. Noise floor: Q is floored at ``noise_floor`` (default 1e-4 × the channel's peak Q,
-   as :func:`kesbrdf.model.fit`) so that K = 1/Q is finite; the floored node counts
+   as :func:`kesbrdf.models.kes.fit`) so that K = 1/Q is finite; the floored node counts
    are recorded in ``diagnostics["floored"]``.
 6. KES: for every (θ_h, θ_d) node the whole-circle interpolation of K = 1/Q over φ
-   (:func:`kesbrdf.kes.interpolate_circle`, 3 or 4 orientations) fills a φ grid of
+   (:func:`kesbrdf.models.interpolation.interpolate_circle`, 3 or 4 orientations) fills a φ grid of
    ``n_phi`` cells.  Where K(φ) ≤ 0 somewhere, the default ``fallback="log"``
    interpolates log Q at that node instead, records the nodes in
    ``diagnostics["fallback"]`` and a one-line warning naming the θ_h affected in
@@ -83,14 +83,14 @@ Evaluation
 ----------
 For a pair (wi, wr) above the horizon: h = wi + wr; φ_h = azimuth of h (where h has
 no in-plane component, the azimuth of wr − wi, the plane of incidence, as
-:func:`kesbrdf.brdf.to_phi_gamma`); θ_h = angle(h, z); θ_d = angle(wi, h), computed
+:func:`kesbrdf.models.brdf.to_phi_gamma`); θ_h = angle(h, z); θ_d = angle(wi, h), computed
 as half the angle between wi and wr; then
 
 .. math:: f_r = c + \frac{T(\phi_h, \theta_h, \theta_d)}{w(\theta_i, \theta_r)}
 
-(w of :func:`kesbrdf.mappings.foreshortening`, √(cos θ_i cos θ_r) away from grazing)
+(w of :func:`kesbrdf.models.mappings.foreshortening`, √(cos θ_i cos θ_r) away from grazing)
 with T read by trilinear interpolation (φ periodic, θ_h and θ_d clamped to the grid;
-beyond the last θ_h the lobe fades to 0 over :data:`kesbrdf.mappings.FADE_DEG` of
+beyond the last θ_h the lobe fades to 0 over :data:`kesbrdf.models.mappings.FADE_DEG` of
 γ = 2θ_h, ``parameters["extrapolation"] = "fade"``; files without it hold the last θ_h).
 (``normalisation="none"``: without the division).  Swapping wi and wr leaves h, θ_h
 and θ_d unchanged, so the model is reciprocal by construction (at h ∥ z the swap
@@ -110,13 +110,13 @@ import numpy as np
 
 from typing import ClassVar
 
-from kesbrdf import kes
+from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
-from kesbrdf.kinds import ReflectanceModel, register
-from kesbrdf.mappings import EXTRAPOLATIONS, HALFDIFF, fade, foreshortening, in_plane_half_diff, to_half_diff
-from kesbrdf.measurement import Measurement
-from kesbrdf.model import (
+from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.mappings import EXTRAPOLATIONS, HALFDIFF, fade, foreshortening, in_plane_half_diff, to_half_diff
+from kesbrdf.measure.measurement import Measurement
+from kesbrdf.models.kes import (
     FALLBACKS,
     ORIENTATION_TOL,
     RELATIVE_NOISE_FLOOR,
@@ -143,7 +143,7 @@ __all__ = [
 #: ``kind`` of the model file (docs/formats.md).
 KIND = "kes-halfdiff"
 #: What the table holds: ``"bounded"`` q = (f − c)·w (default; w of
-#: :func:`kesbrdf.mappings.foreshortening`), ``"sqrtcos"`` q = (f − c)·√(cos θ_i cos θ_r)
+#: :func:`kesbrdf.models.mappings.foreshortening`), ``"sqrtcos"`` q = (f − c)·√(cos θ_i cos θ_r)
 #: (paper eq. 3 unbounded; files without the parameter), ``"none"`` the lobe f − c itself.
 NORMALISATIONS = ("bounded", "sqrtcos", "none")
 #: θ_d is multiplied by this before the Delaunay triangulation (module docstring,
@@ -418,7 +418,7 @@ def fit_halfdiff(
         In-plane rows at ψ = 0, 45, 90° (and 135°), any (θ_i, θ_r) pairs; the more
         incidence angles, the more of the hemisphere is measured rather than assumed.
     orientations : {None, 3, 4}
-        As :func:`kesbrdf.model.fit`.
+        As :func:`kesbrdf.models.kes.fit`.
     fallback : {"log", "error"}
         What to do where K(φ) ≤ 0 between orientations (DESIGN §3): log fallback with
         a recorded warning (default) or :class:`KESError`.
@@ -490,7 +490,7 @@ def fit_halfdiff(
                 )
             q_half[:, :, slot, :] = _resample_slot(th[sel], td[sel], lobe[sel], H, D)
             slot_counts[str(slot)] = int(np.count_nonzero(sel))
-    # 4. body back in: KES works on the measured quantity (as kesbrdf.model.fit)
+    # 4. body back in: KES works on the measured quantity (as kesbrdf.models.kes.fit)
     body_q = c * w_nodes[..., None]  # (h, d, C)
     q_half[:, :, slots, :] += body_q[:, :, None, :]
     # θ_i = θ_r = 0 is one geometry for every ψ: its samples are averaged (with noise
@@ -640,11 +640,11 @@ def evaluate_halfdiff(model: HalfDiffModel, wi, wr) -> np.ndarray:
 
     .. math:: f_r = c + T(\\phi_h, \\theta_h, \\theta_d) / w(\\theta_i, \\theta_r)
 
-    (w of :func:`kesbrdf.mappings.foreshortening`; w = 1 for ``normalisation="none"``).  Zero when either
+    (w of :func:`kesbrdf.models.mappings.foreshortening`; w = 1 for ``normalisation="none"``).  Zero when either
     direction is at or below the horizon; NaN in gives NaN out
-    (:func:`kesbrdf.mappings.evaluate_pairs`).  Same as ``model.evaluate(wi, wr)``.
+    (:func:`kesbrdf.models.mappings.evaluate_pairs`).  Same as ``model.evaluate(wi, wr)``.
 
-    >>> from kesbrdf.gonio import measure
+    >>> from kesbrdf.measure.gonio import measure
     >>> from kesbrdf.references.ward import AnisotropicWard
     >>> m = measure(AnisotropicWard(0.2, 0.3), protocol="dense", step_deg=10)
     >>> model = fit_halfdiff(m)

@@ -1,8 +1,8 @@
 r"""From a model to a BRDF f_r(wi, wr) (paper eq. 3–4, DESIGN §4): the public front end.
 
-:func:`evaluate` works for every model kind (:mod:`kesbrdf.kinds`): it asks the
+:func:`evaluate` works for every model kind (:mod:`kesbrdf.models.base`): it asks the
 model, which checks the mapping it was given against the ones its kind supports and
-evaluates through :func:`kesbrdf.mappings.evaluate_pairs`.  For the ``kes`` kind:
+evaluates through :func:`kesbrdf.models.mappings.evaluate_pairs`.  For the ``kes`` kind:
 
 ``deviation`` (default)
     γ = angle between wr and the mirror image of wi, m = (−x, −y, z);
@@ -10,7 +10,7 @@ evaluates through :func:`kesbrdf.mappings.evaluate_pairs`.  For the ``kes`` kind
 ``halfvector``
     γ = 2 θ_h and φ = φ_h of the half vector (Ward- and microfacet-like).
 ``paper``
-    Eq. 3–4 taken literally (see :func:`kesbrdf.mappings.paper_phi_gamma`).
+    Eq. 3–4 taken literally (see :func:`kesbrdf.models.mappings.paper_phi_gamma`).
 
 For the first two,
 
@@ -18,26 +18,26 @@ For the first two,
 
 with q read from the table by bilinear interpolation (periodic in φ, γ clamped to the
 measured range), w the foreshortening weight (paper eq. 3's √(cos θ_i cos θ_r), bounded
-toward grazing angles: :func:`kesbrdf.mappings.foreshortening`) and fade = 1 up to the
-last measured γ, then to 0 over 6° (:func:`kesbrdf.mappings.fade`); models written
+toward grazing angles: :func:`kesbrdf.models.mappings.foreshortening`) and fade = 1 up to the
+last measured γ, then to 0 over 6° (:func:`kesbrdf.models.mappings.fade`); models written
 before the grazing-energy fix use √(cos θ_i cos θ_r) and hold the last column
 (docs/decisions.md, "Grazing energy").  Both are reciprocal by construction and return every in-plane
 input sample exactly.  The ``kes-halfdiff`` kind has the one mapping ``halfdiff``.
 
-Edges (:mod:`kesbrdf.mappings`): directions are normalised here (any non-zero
+Edges (:mod:`kesbrdf.models.mappings`): directions are normalised here (any non-zero
 length); a pair at or below the horizon — cos θ ≤ :data:`COS_EPS` = 1e-6 for either
 direction, so θ = 90° exactly — gives 0; a non-finite component gives NaN; finite
 input never gives inf or NaN.  Large inputs are evaluated in chunks.
 
-The direction mappings themselves live in :mod:`kesbrdf.mappings` and the table
-lookup in :mod:`kesbrdf.model`; both are re-exported here for backward compatibility.
+The direction mappings themselves live in :mod:`kesbrdf.models.mappings` and the table
+lookup in :mod:`kesbrdf.models.kes`; both are re-exported here for backward compatibility.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.mappings import (
+from kesbrdf.models.mappings import (
     AZIMUTH_EPS,
     COS_EPS,
     MAPPINGS,
@@ -46,7 +46,7 @@ from kesbrdf.mappings import (
     to_phi_gamma,
     validate_mapping,
 )
-from kesbrdf.model import lookup
+from kesbrdf.models.kes import lookup
 
 __all__ = [
     "MAPPINGS",
@@ -66,7 +66,7 @@ def evaluate(model, wi, wr, mapping: str | None = None) -> np.ndarray:
 
     Parameters
     ----------
-    model : kesbrdf.kinds.ReflectanceModel
+    model : kesbrdf.models.base.ReflectanceModel
     wi, wr : array_like, shape (..., 3)
         Directions toward the light and the viewer, fabric frame; normalised here.
     mapping : str, optional
@@ -75,8 +75,8 @@ def evaluate(model, wi, wr, mapping: str | None = None) -> np.ndarray:
         :class:`~kesbrdf.errors.ModelError`.
 
     >>> import numpy as np
-    >>> from kesbrdf.gonio import measure
-    >>> from kesbrdf.model import fit
+    >>> from kesbrdf.measure.gonio import measure
+    >>> from kesbrdf.models.kes import fit
     >>> from kesbrdf.references.ward import AnisotropicWard
     >>> ref = AnisotropicWard(0.2, 0.2, rho_d=0.1, rho_s=0.05)
     >>> m = measure(ref)

@@ -4,12 +4,12 @@ r"""Model kind ``fibre-prior``: the woven-cloth prior times a KES-interpolated r
 
     f_r(\omega_i,\omega_r) = f_\text{prior}(\omega_i,\omega_r)\cdot r(\omega_i,\omega_r)^{\tau(\gamma)}
 
-* :math:`f_\text{prior}` is :class:`kesbrdf.prior.FibrePrior`, fitted to all usable rows;
+* :math:`f_\text{prior}` is :class:`kesbrdf.models.fibre_physics.FibrePrior`, fitted to all usable rows;
 * the residual ratio :math:`r = y / f_\text{prior}` is taken on the in-plane samples of
   the KES incidence line (θ_i + θ_r = 90° in the paper protocol) and interpolated over
   the deviation azimuth φ with the whole-circle extended KES form and linearly over γ,
-  by the same code as the ``kes`` kind (:func:`kesbrdf.model.fit` on the ratio, read
-  back with :func:`kesbrdf.brdf.lookup` and divided by the line weight
+  by the same code as the ``kes`` kind (:func:`kesbrdf.models.kes.fit` on the ratio, read
+  back with :func:`kesbrdf.models.brdf.lookup` and divided by the line weight
   √((cos γ + cos S)/2), which the KES table carries);
 * τ(γ) = 1 inside the measured γ range and falls smoothly (smoothstep) to 0 over
   :data:`RELAX_DEG` beyond it, so the residual relaxes to 1 where nothing was measured;
@@ -35,7 +35,7 @@ KES line with y above the noise floor is reproduced to round-off (the ratio is
 multiplied back exactly there).  Samples with y ≤ 0 cannot be reproduced by a
 positive model: they are floored at ε = 10⁻⁴·max y before the ratio is taken.
 
-:func:`kesbrdf.selection.loo_compare` runs leave-one-orientation-out validation of this
+:func:`kesbrdf.validate.selection.loo_compare` runs leave-one-orientation-out validation of this
 kind against ``kes`` on the user's own data, for ``kind="auto"`` to use.
 """
 
@@ -46,12 +46,12 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from kesbrdf.mappings import to_phi_gamma
+from kesbrdf.models.mappings import to_phi_gamma
 from kesbrdf.errors import MeasurementError, ModelError
-from kesbrdf.kinds import ReflectanceModel, register
-from kesbrdf.measurement import Measurement
-from kesbrdf.model import line_weight, lookup
-from kesbrdf.prior import FibrePrior, fit_prior, fresnel_dielectric
+from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.measure.measurement import Measurement
+from kesbrdf.models.kes import line_weight, lookup
+from kesbrdf.models.fibre_physics import FibrePrior, fit_prior, fresnel_dielectric
 
 __all__ = ["FibrePriorModel", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
@@ -119,7 +119,7 @@ class FibrePriorModel(ReflectanceModel):
             return np.ones(wi.shape[:-1] + (self.n_channels,))
         res = self.residual
         if getattr(res, "mode", "line") == "halfdiff":
-            from kesbrdf.halfdiff import lookup_halfdiff, to_half_diff
+            from kesbrdf.models.halfdiff import lookup_halfdiff, to_half_diff
 
             phi_h, theta_h, theta_d = to_half_diff(wi, wr)
             r = lookup_halfdiff(res, phi_h, theta_h, theta_d)
@@ -137,7 +137,7 @@ class FibrePriorModel(ReflectanceModel):
 
     def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:
         """Prior × residual ratio at unit rows above the horizon (the base class supplies
-        normalisation, the horizon and NaN handling: :func:`kesbrdf.mappings.evaluate_pairs`)."""
+        normalisation, the horizon and NaN handling: :func:`kesbrdf.models.mappings.evaluate_pairs`)."""
         f = self.prior(wi, wr)
         if self.residual is not None:
             f = f * self.residual_ratio(wi, wr)
@@ -340,7 +340,7 @@ def _fit_kes_candidate(m: Measurement):
     for several, None (and why) when neither can fit them.  It is the third candidate of
     the σ model term (:func:`predict_with_uncertainty`)."""
     from kesbrdf.errors import KesbrdfError
-    from kesbrdf.kinds import kind_class
+    from kesbrdf.models.base import kind_class
 
     rm = m.subset(m.is_in_plane) if np.any(m.is_in_plane) else m
     name = "kes-halfdiff" if _incidence_lines(rm) > 1 else "kes"
@@ -409,7 +409,7 @@ def ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
 
 def ratio_table(rm: Measurement):
     """KES table of a ratio measurement (module docstring)."""
-    from kesbrdf.model import fit as kes_fit
+    from kesbrdf.models.kes import fit as kes_fit
 
     # the ratio is dimensionless and is not divided by any foreshortening at evaluation:
     # the line weight only passes through the table and is divided out again (sqrtcos)
@@ -428,7 +428,7 @@ def _incidence_lines(m: Measurement) -> int:
 
 def _halfdiff_table(rm: Measurement):
     """(φ_h, θ_h, θ_d) table of a ratio measurement with several incidence lines."""
-    from kesbrdf.halfdiff import fit_halfdiff, in_plane_half_diff
+    from kesbrdf.models.halfdiff import fit_halfdiff, in_plane_half_diff
 
     hd = fit_halfdiff(rm, body="none", fallback="log", noise_floor=1e-12, normalisation="none")
     theta_h = in_plane_half_diff(rm.theta_i, rm.theta_r)[0]
@@ -439,7 +439,7 @@ def _halfdiff_table(rm: Measurement):
 
 def _fit_residual(prior: FibrePrior, m: Measurement):
     """The residual of ``prior`` on ``m``: the KES line table for one incidence line, the
-    (φ_h, θ_h, θ_d) table (:mod:`kesbrdf.halfdiff`) for several; raises
+    (φ_h, θ_h, θ_d) table (:mod:`kesbrdf.models.halfdiff`) for several; raises
     MeasurementError without KES orientations."""
     rm = ratio_measurement(prior, m)
     if _incidence_lines(rm) > 1:

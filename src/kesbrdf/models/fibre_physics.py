@@ -706,7 +706,7 @@ def _subsample(d: _Data, n_max: int, seed: int = 0) -> _Data:
 
 
 def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None, max_nfev: int = 200) -> FibrePrior:
-    """Fit the prior to a :class:`~kesbrdf.measurement.Measurement` (module docstring).
+    """Fit the prior to a :class:`~kesbrdf.measure.measurement.Measurement` (module docstring).
 
     Parameters
     ----------
@@ -792,7 +792,7 @@ def _laplace_covariance(spec, x, d: _Data) -> np.ndarray:
     s² = 1 when the measurement carried uncertainties (the residuals are already in
     units of σ), else RSS/(n − k).  Directions the data does not constrain get the
     pseudo-inverse's zero: their uncertainty is carried by the model term of
-    :func:`kesbrdf.prior_model.predict_with_uncertainty`, not here.
+    :func:`kesbrdf.models.fibre_prior.predict_with_uncertainty`, not here.
     """
     r0, J = _residual_jacobian(spec, x, d)
     n, k = J.shape

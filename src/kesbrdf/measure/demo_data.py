@@ -35,7 +35,7 @@ def embedded_manifest() -> Path | None:
 
     path = _data() / "virtual_black_satin" / "manifest.csv"
     try:
-        import kesbrdf.acquisition.ingest  # noqa: F401
+        import kesbrdf.measure.acquisition.ingest  # noqa: F401
     except ImportError:
         return None
     if importlib.util.find_spec("tifffile") is None:  # the frames are 16-bit TIFF

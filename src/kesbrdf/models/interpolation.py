@@ -57,7 +57,7 @@ def kes3(K0, K45, K90, phi):
         1/ρ at φ = 0, π/4, π/2; broadcast together with ``phi``.
     phi : array_like
         Orientation, radians (the paper measures it from the warp here; see
-        ``kesbrdf.brdf`` for the paper's own wording).
+        ``kesbrdf.models.brdf`` for the paper's own wording).
 
     Returns
     -------

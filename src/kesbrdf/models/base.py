@@ -37,7 +37,7 @@ Methods:
 A kind implements ``evaluate_unit(wi, wr, mapping) -> (n, C)``, its core: the base
 class's :meth:`ReflectanceModel.evaluate` checks the mapping and hands the core only
 clean pairs (unit rows above the horizon, in chunks) through
-:func:`kesbrdf.mappings.evaluate_pairs`, which supplies the zeros and NaNs.
+:func:`kesbrdf.models.mappings.evaluate_pairs`, which supplies the zeros and NaNs.
 
 Fitters and automatic selection
 -------------------------------
@@ -62,7 +62,7 @@ import numpy as np
 
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
-from kesbrdf.mappings import evaluate_pairs
+from kesbrdf.models.mappings import evaluate_pairs
 
 __all__ = [
     "ReflectanceModel",
@@ -81,16 +81,16 @@ __all__ = [
 #: Where each kind's class lives; imported on first use so that a kind's heavy
 #: dependencies are paid only by its users.  One line per kind.
 KIND_MODULES: dict[str, str] = {
-    "kes": "kesbrdf.model",
-    "kes-halfdiff": "kesbrdf.halfdiff",
-    "fibre-prior": "kesbrdf.prior_model",
+    "kes": "kesbrdf.models.kes",
+    "kes-halfdiff": "kesbrdf.models.halfdiff",
+    "fibre-prior": "kesbrdf.models.fibre_prior",
 }
 
 #: Where each fitter lives: every kind, plus fitting methods that produce an existing
 #: kind (``scattered`` builds a ``kes`` model).  One line per fitter.
 FIT_MODULES: dict[str, str] = {
     **KIND_MODULES,
-    "scattered": "kesbrdf.scattered",
+    "scattered": "kesbrdf.models.scattered",
 }
 
 #: The order in which ``kesbrdf.fit(m, kind="auto")`` tries the fitters: the first that
@@ -148,8 +148,8 @@ class ReflectanceModel:
         """f_r(wi, wr) in 1/sr, shape broadcast(wi, wr)[:-1] + (C,).
 
         Directions need not be normalised; a pair at or below the horizon
-        (cos θ ≤ :data:`kesbrdf.mappings.COS_EPS`, or a zero vector) gives 0, a pair
-        with a non-finite component gives NaN (:func:`kesbrdf.mappings.evaluate_pairs`).
+        (cos θ ≤ :data:`kesbrdf.models.mappings.COS_EPS`, or a zero vector) gives 0, a pair
+        with a non-finite component gives NaN (:func:`kesbrdf.models.mappings.evaluate_pairs`).
         """
         mapping = self.check_mapping(mapping)
         return evaluate_pairs(self.evaluate_unit, wi, wr, self.n_channels, mapping)

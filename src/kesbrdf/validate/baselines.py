@@ -1,6 +1,6 @@
 """The default model against the interpolation baselines, with a plain verdict per case.
 
-:func:`kesbrdf.validation.compare_reference` fits KES and its baselines (nearest
+:func:`kesbrdf.validate.compare.compare_reference` fits KES and its baselines (nearest
 measured orientation, linear interpolation over φ) from one measurement and scores
 them on held-out orientations and the Fig. 6 hemispheres.  :func:`compare_models` adds
 any further models (the default ``kesbrdf.fit`` choice, the fibre-prior candidates)
@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.validation import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
+from kesbrdf.measure.gonio import measure
+from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
 
 __all__ = ["compare_models", "verdicts", "BASELINES", "RIM_THETA_DEG", "HIGHLIGHT_QUANTILE"]
 
@@ -61,7 +61,7 @@ def compare_models(m, reference, models: dict, baselines: dict, default: str,
     reference : callable f(wi, wr) -> (..., C)
         The truth.
     models, baselines : dict name -> model
-        Models evaluated with :func:`kesbrdf.brdf.evaluate` in their own mapping.
+        Models evaluated with :func:`kesbrdf.models.brdf.evaluate` in their own mapping.
     default : str
         The name (in ``models``) of the default model, judged by :func:`verdicts`.
 

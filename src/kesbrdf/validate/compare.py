@@ -2,7 +2,7 @@
 
 Metrics are per channel; baselines (nearest measured orientation, linear
 interpolation over φ) are models built from the same samples with another φ
-interpolation (``kesbrdf.model.fit(interpolation=...)``), so the value of KES is
+interpolation (``kesbrdf.models.kes.fit(interpolation=...)``), so the value of KES is
 measured, not assumed.
 """
 
@@ -10,11 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import measure
-from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG, Measurement
-from kesbrdf.model import fit
+from kesbrdf.measure.gonio import measure
+from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG, Measurement
+from kesbrdf.models.kes import fit
 
 __all__ = [
     "metrics",
@@ -69,7 +69,7 @@ def validate(model, m: Measurement, mapping: str | None = None) -> dict:
 
     ``mapping`` defaults to the model's own (``parameters["mapping"]``, else
     ``deviation``).  A model fitted to scattered data in a sample frame
-    (:func:`kesbrdf.scattered.fit_scattered`) is evaluated in that frame, turned by its
+    (:func:`kesbrdf.models.scattered.fit_scattered`) is evaluated in that frame, turned by its
     recorded ``warp_offset_deg``.
     """
     if mapping is None:
@@ -78,7 +78,7 @@ def validate(model, m: Measurement, mapping: str | None = None) -> dict:
     mapping = model.check_mapping(mapping)
     warp = getattr(model, "sample_frame_warp", 0.0)
     if warp:
-        from kesbrdf.scattered import to_fabric_frame
+        from kesbrdf.models.scattered import to_fabric_frame
 
         pred = evaluate(model, to_fabric_frame(m.wi, warp), to_fabric_frame(m.wr, warp), mapping)
     else:

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.brdf import evaluate
+from kesbrdf.models.brdf import evaluate
 from kesbrdf.geometry import grazing_albedo, spherical_to_cartesian  # noqa: F401  (grazing_albedo: public here too)
-from kesbrdf.model import gamma0_behaviour
+from kesbrdf.models.kes import gamma0_behaviour
 
 __all__ = ["directional_albedo", "grazing_albedo", "GRAZING_ANGLES_DEG", "reciprocity_error", "gamma0_behaviour", "diagnose"]
 
@@ -72,7 +72,7 @@ def diagnose(model, mapping: str | None = None, theta_deg=(0, 20, 40, 60, 80), p
     """All diagnostics of a model of any kind as plain numbers (JSON-ready).
 
     ``mapping`` defaults to the kind's own; the mirror-direction report is the kind's
-    :meth:`~kesbrdf.kinds.ReflectanceModel.mirror_behaviour`.
+    :meth:`~kesbrdf.models.base.ReflectanceModel.mirror_behaviour`.
     """
     mapping = model.check_mapping(mapping)
 

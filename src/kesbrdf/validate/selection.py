@@ -1,7 +1,7 @@
 """Model selection on the user's own data: leave-one-orientation-out comparison of kinds.
 
 ``kesbrdf.fit(m, kind="auto")`` first picks the kind that uses every row (docs/models.md);
-when the woven-cloth prior (:mod:`kesbrdf.prior_model`) can also use every row, it is
+when the woven-cloth prior (:mod:`kesbrdf.models.fibre_prior`) can also use every row, it is
 compared with that choice by :func:`loo_compare` and :func:`choose` decides.  On a
 fabric symmetric in y the two biases are mirror images (:func:`mirror_test`) and a
 held-out bias tells nothing, so the prior is also judged against linear interpolation
@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from kesbrdf.measurement import Measurement
-from kesbrdf.prior import fit_prior
-from kesbrdf.prior_model import FibrePriorModel, ratio_measurement, ratio_table
-from kesbrdf.validation import leave_one_orientation_out, mirror_135_to_45
+from kesbrdf.measure.measurement import Measurement
+from kesbrdf.models.fibre_physics import fit_prior
+from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio_table
+from kesbrdf.validate.compare import leave_one_orientation_out, mirror_135_to_45
 
 __all__ = ["loo_compare", "choose", "mirror_test", "orientation_interpolation_loo", "MIRROR_Z", "INTERPOLATION"]
 
@@ -30,7 +30,7 @@ def loo_compare(measurement, **fit_options) -> dict:
     """Leave-one-orientation-out NRMSE of ``fibre-prior`` (with and without residual) and ``kes``.
 
     Each measured orientation is predicted from the others.  ``kes`` can predict only a
-    bias (it needs warp and weft; :func:`kesbrdf.validation.leave_one_orientation_out`);
+    bias (it needs warp and weft; :func:`kesbrdf.validate.compare.leave_one_orientation_out`);
     the pure prior predicts every orientation; prior + residual is reported for the
     biases, with the residual built from the remaining orientations exactly as ``kes``
     builds its table (the other bias mirrored, y → −y).
@@ -163,7 +163,7 @@ def kfold_compare(measurement, candidates=("scattered", "fibre-prior"), k: int =
 
     Rows are split into ``k`` folds at random (seeded, so the choice is repeatable);
     each fitter is fitted on k − 1 folds and predicts the held-out one.  The error is
-    the RMS of ln((p + ε)/(t + ε)), ε = 10⁻⁴·max|t| (:func:`kesbrdf.validation.metrics`'s
+    the RMS of ln((p + ε)/(t + ε)), ε = 10⁻⁴·max|t| (:func:`kesbrdf.validate.compare.metrics`'s
     ``log_rmse``): real gonio data spans decades, and a relative error weighs them alike.
 
     Returns
@@ -173,7 +173,7 @@ def kfold_compare(measurement, candidates=("scattered", "fibre-prior"), k: int =
         "best": candidate}``; a candidate whose fit fails on a fold is left out.
     """
     from kesbrdf.errors import KesbrdfError
-    from kesbrdf.kinds import fitter_class
+    from kesbrdf.models.base import fitter_class
 
     m = measurement
     n = len(m)
@@ -265,7 +265,7 @@ def mirror_test(measurement) -> dict:
     """Are the two biases mirror images of each other within the noise?
 
     The mirror y → −y takes (ψ = 135°, θ_i, θ_r) to (45°, θ_r, θ_i)
-    (:func:`kesbrdf.validation.mirror_135_to_45`); on one incidence line the mirrored
+    (:func:`kesbrdf.validate.compare.mirror_135_to_45`); on one incidence line the mirrored
     135° samples are interpolated onto the 45° ones, and
 
     * ``nrmse`` is the NRMSE between the 45° line and the mirrored 135° line;

@@ -15,7 +15,7 @@ The expected error is the median over lights and truths of the hemisphere NRMSE
 
 .. math:: \mathrm{NRMSE} = \frac{\sqrt{\langle (f_\mathrm{model} - f_\mathrm{true})^2\rangle}}{\langle |f_\mathrm{true}| \rangle}
 
-(:func:`kesbrdf.validation.metrics`), over the same (θ_r, φ_r) grid as Fig. 6.
+(:func:`kesbrdf.validate.compare.metrics`), over the same (θ_r, φ_r) grid as Fig. 6.
 
 Candidate sample groups (:func:`group_geometry`)
 ------------------------------------------------
@@ -44,9 +44,9 @@ import numpy as np
 
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.geometry import spherical_to_cartesian
-from kesbrdf.gonio import protocol_geometry
-from kesbrdf.measurement import Measurement
-from kesbrdf.validation import hemisphere_directions, metrics
+from kesbrdf.measure.gonio import protocol_geometry
+from kesbrdf.measure.measurement import Measurement
+from kesbrdf.validate.compare import hemisphere_directions, metrics
 
 __all__ = [
     "PLAN_LIGHTS_DEG",
@@ -154,7 +154,7 @@ def simulate(truth, groups, noise: float = 0.0, rng=None) -> Measurement:
     """Measure ``truth`` (callable f(wi, wr) -> (..., C)) at the samples of ``groups``.
 
     Noise is relative Gaussian with standard deviation ``noise``·|f| (as
-    :func:`kesbrdf.gonio.measure`); duplicates across groups are kept once.
+    :func:`kesbrdf.measure.gonio.measure`); duplicates across groups are kept once.
     """
     g = protocol_samples(groups)
     wi = spherical_to_cartesian(g.theta_i, g.phi_i)
@@ -182,7 +182,7 @@ def default_fit(m: Measurement):
 
     Without the held-out comparison with the prior (``compare=False``): the planner fits
     every candidate protocol many times, and a comparison costs four prior fits (the
-    leave-one-orientation-out of :func:`kesbrdf.selection.loo_compare`, ~10 s of CPU on
+    leave-one-orientation-out of :func:`kesbrdf.validate.selection.loo_compare`, ~10 s of CPU on
     116 samples) plus the kept one, against ~0.1 s for a KES fit; it would make
     ``kesbrdf plan`` tens of times slower, not the 2× allowed (docs/decisions.md).  The
     mirror test and the interpolation baseline alone are cheap, but without the prior's
@@ -201,7 +201,7 @@ def fitter(kind: str = "auto"):
     against ~0.1 s for KES, so a plan costs tens of seconds): the answer for users who
     will fit that kind, e.g. after ``kesbrdf fit`` kept it on their fabric.
     """
-    from kesbrdf.kinds import known_fitters
+    from kesbrdf.models.base import known_fitters
 
     if kind == "auto":
         return default_fit
@@ -231,7 +231,7 @@ class _Truth:
 
 
 def _model_errors(model, truth: _Truth) -> list[float]:
-    from kesbrdf.brdf import evaluate
+    from kesbrdf.models.brdf import evaluate
 
     out = []
     for _, wi, f_true in truth.lights:

@@ -23,7 +23,7 @@ import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
-from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG, Measurement
+from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG, Measurement
 
 __all__ = ["PROTOCOLS", "protocol_geometry", "measure"]
 

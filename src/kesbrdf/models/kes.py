@@ -5,7 +5,7 @@ table of the lobe quantity
 
 .. math:: q(\phi, \gamma) = (f_r - c)\,w(\theta_i, \theta_r)
 
-(w the foreshortening weight, :func:`kesbrdf.mappings.foreshortening`: paper eq. 3's
+(w the foreshortening weight, :func:`kesbrdf.models.mappings.foreshortening`: paper eq. 3's
 √(cos θ_i cos θ_r), bounded toward grazing angles; ``parameters["normalisation"]``)
 over the whole circle of deviation azimuths φ ∈ [0, 2π) and deviations γ ≥ 0, plus a
 Lambertian body term c (DESIGN §4).  The table *is* the model: every consumer (numpy
@@ -27,7 +27,7 @@ How the table is filled
 4. Each of the eight half-sample curves is resampled onto a uniform γ grid
    (linear in q; the grid contains every measured |γ| when they are uniformly
    spaced, so the measured values are kept exactly).
-5. For every γ of the grid, K = 1/q is interpolated over φ by :mod:`kesbrdf.kes`.
+5. For every γ of the grid, K = 1/q is interpolated over φ by :mod:`kesbrdf.models.interpolation`.
    Where K(φ) ≤ 0 somewhere (the hazard of DESIGN §3, common on satins), the default
    ``fallback="log"`` interpolates log q instead at that γ, records it in
    ``diagnostics["fallback_gamma_deg"]`` and adds a one-line warning naming the γ
@@ -47,11 +47,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from kesbrdf import kes
+from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
-from kesbrdf.kinds import ReflectanceModel, register
-from kesbrdf.mappings import (
+from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
     MAPPINGS,
     NORMALISATIONS,
@@ -61,7 +61,7 @@ from kesbrdf.mappings import (
     line_foreshortening,
     to_phi_gamma,
 )
-from kesbrdf.measurement import Measurement
+from kesbrdf.measure.measurement import Measurement
 
 __all__ = [
     "Model",
@@ -147,13 +147,13 @@ class Model(ReflectanceModel):
 
     @property
     def normalisation(self) -> str:
-        """What the table holds, :data:`kesbrdf.mappings.NORMALISATIONS`: ``bounded``, or
+        """What the table holds, :data:`kesbrdf.models.mappings.NORMALISATIONS`: ``bounded``, or
         ``sqrtcos`` for files written before it (their tables were fitted so)."""
         return str(self.parameters.get("normalisation", "sqrtcos"))
 
     @property
     def extrapolation(self) -> str:
-        """The lobe beyond γ_max, :data:`kesbrdf.mappings.EXTRAPOLATIONS`: ``fade``, or
+        """The lobe beyond γ_max, :data:`kesbrdf.models.mappings.EXTRAPOLATIONS`: ``fade``, or
         ``hold`` for files written before it."""
         return str(self.parameters.get("extrapolation", "hold"))
 
@@ -500,7 +500,7 @@ def _merge_close(values, tol: float = 1e-12) -> np.ndarray:
 
 def line_weight(gamma, line_sum: float, normalisation: str = "sqrtcos") -> np.ndarray:
     """Foreshortening weight on the line θ_i + θ_r = S at deviation γ
-    (:func:`kesbrdf.mappings.line_foreshortening`); ``sqrtcos``: √((cos γ + cos S)/2)."""
+    (:func:`kesbrdf.models.mappings.line_foreshortening`); ``sqrtcos``: √((cos γ + cos S)/2)."""
     return line_foreshortening(gamma, line_sum, normalisation)
 
 
@@ -540,10 +540,10 @@ def fit(
     gamma_step : float, optional
         γ step of the table, radians (default: the measured spacing, at most 1°).
     normalisation : {"bounded", "sqrtcos"}
-        Foreshortening weight w of q = (f − c)·w (:func:`kesbrdf.mappings.foreshortening`);
+        Foreshortening weight w of q = (f − c)·w (:func:`kesbrdf.models.mappings.foreshortening`);
         ``sqrtcos`` is eq. 3 literally, whose lobe gains energy toward grazing incidence.
     extrapolation : {"fade", "hold"}
-        The lobe beyond the last measured deviation (:data:`kesbrdf.mappings.EXTRAPOLATIONS`).
+        The lobe beyond the last measured deviation (:data:`kesbrdf.models.mappings.EXTRAPOLATIONS`).
 
     Returns
     -------
@@ -705,7 +705,7 @@ def fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallba
     """q(φ, γ) table, shape (n_phi, n_gamma, C), and the γ indices that fell back.
 
     ``q_half`` (n_gamma, 8, C): half-sample values per γ; K = 1/q is interpolated over
-    φ (:mod:`kesbrdf.kes`), log q where K ≤ 0 and ``fallback="log"``.
+    φ (:mod:`kesbrdf.models.interpolation`), log q where K ≤ 0 and ``fallback="log"``.
     """
     slots = kes.half_slots(orientations)
     n_gamma, _, C = q_half.shape

@@ -3,30 +3,30 @@ r"""Fit the extended-KES model to scattered gonio data (DESIGN §4, last paragra
 The paper builds its table from in-plane curves at ψ = 0, π/4, π/2, 3π/4.  Real data
 sets (CUReT, a lab's own gonio archive) hold scattered configurations instead, in a
 sample frame whose azimuth zero is not the warp.  :func:`fit_scattered` estimates the
-same model from them: the result is a :class:`kesbrdf.model.Model` of kind ``"kes"``,
-the same table format, so every consumer (``kesbrdf.brdf.evaluate``, the renderer,
+same model from them: the result is a :class:`kesbrdf.models.kes.Model` of kind ``"kes"``,
+the same table format, so every consumer (``kesbrdf.models.brdf.evaluate``, the renderer,
 the viewer) uses it unchanged.
 
 Parameterisation
 ----------------
 The unknowns are *virtual in-plane measurements*: the lobe
 :math:`\ell_{n,s} = \exp\theta_{n,s} > 0` at a coarse set of deviations γ_n
-(:data:`GAMMA_NODES_DEG`) and the eight half-azimuths s·π/4 (:data:`kesbrdf.kes.HALF_AZIMUTHS`),
+(:data:`GAMMA_NODES_DEG`) and the eight half-azimuths s·π/4 (:data:`kesbrdf.models.interpolation.HALF_AZIMUTHS`),
 plus a Lambertian body c ≥ 0.  The table is then built exactly as
-:func:`kesbrdf.model.fit` builds it from in-plane data on the paper's line
+:func:`kesbrdf.models.kes.fit` builds it from in-plane data on the paper's line
 θ_i + θ_r = π/2:
 
 1. total half-samples q_{n,s} = ℓ_{n,s} + c·w(γ_n), w(γ) the line's foreshortening
-   weight (:func:`kesbrdf.mappings.line_foreshortening`: √(cos γ / 2), bounded toward
+   weight (:func:`kesbrdf.models.mappings.line_foreshortening`: √(cos γ / 2), bounded toward
    grazing angles; zero beyond γ = π/2);
 2. linear interpolation in q onto the table's uniform γ grid;
 3. KES on K = 1/q over the whole circle of deviation azimuths
-   (:func:`kesbrdf.kes.interpolate_circle`, through ``kesbrdf.model._fill_table`` with
+   (:func:`kesbrdf.models.interpolation.interpolate_circle`, through ``kesbrdf.models.kes._fill_table`` with
    ``fallback="log"`` where K(φ) ≤ 0);
 4. body split: lobe = max(q(φ, γ) − c·w(γ), 0).
 
 So f_r = c + lobe(φ, γ)/w(θ_i, θ_r) (``deviation`` mapping, w of
-:func:`kesbrdf.mappings.foreshortening`) is positive and
+:func:`kesbrdf.models.mappings.foreshortening`) is positive and
 finite everywhere, and reciprocal by construction.
 
 Symmetric variants (``symmetry``): ``"none"`` (8 free half-azimuths: pile/nap allowed),
@@ -45,13 +45,13 @@ Robust least squares (``scipy.optimize.least_squares``, analytic Jacobian) of
 .. math:: r_j = \ln\frac{\hat f_j + \varepsilon}{\max(f_j, 0) + \varepsilon}
 
 with ε = :data:`LOG_EPS_REL` × max f (the same ε as
-:func:`kesbrdf.validation.metrics`), a soft-L1 loss of scale ``loss_scale``, and two
+:func:`kesbrdf.validate.compare.metrics`), a soft-L1 loss of scale ``loss_scale``, and two
 quadratic smoothness penalties on θ: the change of slope (per radian of γ) between
 neighbouring γ intervals (weight ``smooth_gamma``) and first differences between
 neighbouring half-azimuths (weight ``smooth_phi``; it pulls sparse data toward
 isotropy).  One set of hyper-parameters serves every data set; the defaults were
 chosen on simulated anisotropic Ward lobes at the CUReT configurations (5 % noise,
-5 folds), never on the real data.  The residual function reproduces :func:`kesbrdf.brdf.evaluate` of the final model (same
+5 folds), never on the real data.  The residual function reproduces :func:`kesbrdf.models.brdf.evaluate` of the final model (same
 table columns, same bilinear lookup) to round-off.
 
 Warp azimuth
@@ -92,12 +92,12 @@ import math
 
 import numpy as np
 
-from kesbrdf import kes
+from kesbrdf.models import interpolation as kes
 from kesbrdf.errors import KesbrdfError, MeasurementError
-from kesbrdf.kinds import register_fitter
-from kesbrdf.mappings import foreshortening, to_phi_gamma
-from kesbrdf.measurement import Measurement
-from kesbrdf.model import Model, fallback_warning, fill_table, line_weight
+from kesbrdf.models.base import register_fitter
+from kesbrdf.models.mappings import foreshortening, to_phi_gamma
+from kesbrdf.measure.measurement import Measurement
+from kesbrdf.models.kes import Model, fallback_warning, fill_table, line_weight
 
 __all__ = [
     "fit_scattered",
@@ -123,14 +123,14 @@ COVERAGE_MIN_GAMMA_DEG = 5.0
 GAMMA_NODES_DEG = (0, 8, 15, 25, 35, 45, 60, 75, 90, 105, 120, 135, 150, 165, 180)
 #: γ step of the table (radians); every node is on the grid.
 GAMMA_STEP = math.radians(1.0)
-#: φ cells of the table (as kesbrdf.model; the half-azimuths k·45° are on the grid).
+#: φ cells of the table (as kesbrdf.models.kes; the half-azimuths k·45° are on the grid).
 N_PHI = 360
-#: Log-error floor relative to the channel's peak, as kesbrdf.validation.LOG_EPS_REL.
+#: Log-error floor relative to the channel's peak, as kesbrdf.validate.compare.LOG_EPS_REL.
 LOG_EPS_REL = 1e-3
 #: The paper's incidence line θ_i + θ_r = π/2: the virtual in-plane samples live on it.
 LINE_SUM = math.pi / 2
-#: Foreshortening weight of the table (:func:`kesbrdf.mappings.foreshortening`), as
-#: :func:`kesbrdf.model.fit`'s default.
+#: Foreshortening weight of the table (:func:`kesbrdf.models.mappings.foreshortening`), as
+#: :func:`kesbrdf.models.kes.fit`'s default.
 NORMALISATION = "bounded"
 
 #: Default hyper-parameters, one set for every fabric, chosen on simulated Ward lobes
@@ -155,7 +155,7 @@ def _scipy_optimize():
     try:
         import scipy.optimize
     except ImportError as exc:  # pragma: no cover - scipy is in the cli and test extras
-        raise ImportError("kesbrdf.scattered needs scipy: install kesbrdf[cli] (or pip install scipy)") from exc
+        raise ImportError("kesbrdf.models.scattered needs scipy: install kesbrdf[cli] (or pip install scipy)") from exc
     return scipy.optimize
 
 
@@ -242,7 +242,7 @@ class _Problem:
         self.eps = LOG_EPS_REL * max(float(np.max(np.abs(f))), np.finfo(float).tiny)
         self.log_t = np.log(np.maximum(f, 0.0) + self.eps)
         self.loss_scale = loss_scale
-        # γ side of the bilinear lookup (kesbrdf.brdf.lookup), fixed for the data
+        # γ side of the bilinear lookup (kesbrdf.models.brdf.lookup), fixed for the data
         n_gamma = gamma_grid.size
         v = np.clip(gamma, 0.0, gamma_grid[-1]) / (gamma_grid[1] - gamma_grid[0])
         j0 = np.minimum(np.floor(v).astype(np.intp), n_gamma - 1)
@@ -300,7 +300,7 @@ class _Problem:
         return theta, c
 
     def table_columns(self, theta, c, columns):
-        """Lobe table at γ-grid rows ``columns`` (as kesbrdf.model.fit), (|cols|, n_phi), and extras."""
+        """Lobe table at γ-grid rows ``columns`` (as kesbrdf.models.kes.fit), (|cols|, n_phi), and extras."""
         P = _hat_matrix(self.gamma_grid[columns], self.gamma_nodes)
         q_half = P @ (np.exp(theta) + c * self.w_nodes[:, None])  # (cols, 8)
         T, fallback = fill_table(q_half[:, :, None], self.phi_grid, self.gamma_grid[columns], 4, "kes", "log")
@@ -437,7 +437,7 @@ def fit_scattered(
         isotropic-curve baseline.  The choice made is ``parameters["symmetry"]``.
     body : "fit", "none" or float
         Lambertian body c in 1/sr: estimated (c > 0; ``"auto"`` is accepted as a synonym,
-        as in :func:`kesbrdf.model.fit`), zero (the paper's pure lobe) or given.
+        as in :func:`kesbrdf.models.kes.fit`), zero (the paper's pure lobe) or given.
     smooth_gamma, smooth_phi : float
         Weights of the smoothness penalties over γ and over the half-azimuths.
     loss_scale : float
@@ -459,7 +459,7 @@ def fit_scattered(
     Model
         Kind ``"kes"``; ``parameters["warp_offset_deg"]`` is the sample-frame azimuth of
         the warp (turn sample-frame directions by its negative before
-        :func:`kesbrdf.brdf.evaluate`, or use :func:`evaluate_sample_frame`).
+        :func:`kesbrdf.models.brdf.evaluate`, or use :func:`evaluate_sample_frame`).
 
     Raises
     ------
@@ -657,7 +657,7 @@ def fit_scattered(
 
 @register_fitter("scattered")
 class ScatteredFit:
-    """The scattered fit as a fitter of :mod:`kesbrdf.kinds`: it produces a ``kes`` model.
+    """The scattered fit as a fitter of :mod:`kesbrdf.models.base`: it produces a ``kes`` model.
 
     Decision (docs/decisions.md): not a kind of its own.  The table, the file and the
     evaluation are the ``kes`` kind's, so the renderer, the viewer and the exports read

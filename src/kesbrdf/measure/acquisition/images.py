@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf._atomic import atomic_path
-from kesbrdf.acquisition.sensor import RESPONSES, srgb_decode
+from kesbrdf.measure.acquisition.sensor import RESPONSES, srgb_decode
 from kesbrdf.errors import FormatError, validate_choice, where
 from kesbrdf.io.files import open_regular
 

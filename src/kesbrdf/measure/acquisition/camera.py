@@ -2,8 +2,8 @@ r"""A virtual gonioreflectometer that takes pictures.
 
 :func:`simulate_images` photographs a flat fabric sample with any reference BRDF
 (a callable ``f(wi, wr) -> (..., C)``) at the geometries of a measurement protocol
-(:func:`kesbrdf.gonio.protocol_geometry`), plus white-reference and dark frames, and
-writes the frames and a manifest that :func:`kesbrdf.acquisition.ingest.ingest` reads.
+(:func:`kesbrdf.measure.gonio.protocol_geometry`), plus white-reference and dark frames, and
+writes the frames and a manifest that :func:`kesbrdf.measure.acquisition.ingest.ingest` reads.
 
 Why numpy and not Mitsuba
 -------------------------
@@ -20,7 +20,7 @@ would compute exactly this constant per pixel (the radiance of a flat BRDF sampl
 under a directional emitter has no spatial variation and no interreflection), at
 thousands of times the cost and with Monte-Carlo noise that a real camera does not
 have.  Everything that makes real frames differ from that constant is in the sensor
-(:class:`kesbrdf.acquisition.sensor.Sensor`: photon and read noise, dark current,
+(:class:`kesbrdf.measure.acquisition.sensor.Sensor`: photon and read noise, dark current,
 clipping, vignetting, quantisation), which is simulated per pixel.  The frame shows
 the sample as a square of side ``size − 2·margin`` pixels on a black mount
 (reflectance 0), and the manifest's ROI is that square inset by ``roi_inset`` pixels.
@@ -44,12 +44,12 @@ from pathlib import Path
 
 import numpy as np
 
-from kesbrdf.acquisition.images import write_image
-from kesbrdf.acquisition.manifest import write_manifest
-from kesbrdf.acquisition.sensor import Sensor
+from kesbrdf.measure.acquisition.images import write_image
+from kesbrdf.measure.acquisition.manifest import write_manifest
+from kesbrdf.measure.acquisition.sensor import Sensor
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.geometry import in_plane_directions
-from kesbrdf.measurement import PAPER_ORIENTATIONS_DEG
+from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG
 
 __all__ = ["simulate_images", "EXPOSURE_LADDER_S", "WHITE_LAYOUTS", "FILE_FORMATS"]
 
@@ -106,7 +106,7 @@ def simulate_images(
     outdir : path
         Folder for the frames and ``manifest.csv`` (created).
     protocol, step_deg, orientations_deg
-        As :func:`kesbrdf.gonio.protocol_geometry` (``"paper"``: 4 × 29 frames).
+        As :func:`kesbrdf.measure.gonio.protocol_geometry` (``"paper"``: 4 × 29 frames).
     size, margin, roi_inset : int
         Frame side, mount border and ROI inset, pixels.
     sensor : Sensor, optional
@@ -124,7 +124,7 @@ def simulate_images(
     n_dark : int
         Dark frames per exposure time.
     file_format : {"tiff", "png", "exr"}
-        16-bit colour needs TIFF or EXR (see :mod:`kesbrdf.acquisition.images`).
+        16-bit colour needs TIFF or EXR (see :mod:`kesbrdf.measure.acquisition.images`).
     seed : int or None
         Seed of the noise; a fixed seed regenerates identical frames.
     sample : str, optional
@@ -137,7 +137,7 @@ def simulate_images(
     Path
         The manifest path.
     """
-    from kesbrdf.gonio import protocol_geometry
+    from kesbrdf.measure.gonio import protocol_geometry
 
     sensor = sensor or Sensor()
     validate_choice("whites", whites, WHITE_LAYOUTS)

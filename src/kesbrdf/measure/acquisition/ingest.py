@@ -1,8 +1,8 @@
 r"""From gonioreflectometer photographs to calibrated BRDF values (``kesbrdf ingest``).
 
-For every ``sample`` frame of a manifest (:mod:`kesbrdf.acquisition.manifest`):
+For every ``sample`` frame of a manifest (:mod:`kesbrdf.measure.acquisition.manifest`):
 
-1. **Read** the frame (8/16-bit PNG/TIFF, OpenEXR: :mod:`kesbrdf.acquisition.images`)
+1. **Read** the frame (8/16-bit PNG/TIFF, OpenEXR: :mod:`kesbrdf.measure.acquisition.images`)
    and check that it has the size and bit depth of every other frame.
 2. **Linearise** it (manifest ``response``) and **subtract the dark frame** of the same
    exposure, pixel by pixel (the mean of all dark frames at that exposure).
@@ -60,8 +60,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from kesbrdf.acquisition.images import Frame, linearize, read_image, sha256_file
-from kesbrdf.acquisition.manifest import Manifest, ManifestRow, read_manifest
+from kesbrdf.measure.acquisition.images import Frame, linearize, read_image, sha256_file
+from kesbrdf.measure.acquisition.manifest import Manifest, ManifestRow, read_manifest
 from kesbrdf.errors import KesbrdfError, MeasurementError, where, validate_choice
 
 __all__ = [
@@ -195,7 +195,7 @@ def ingest(manifest_path, saturation: str = "reject", progress=None) -> IngestRe
     Returns
     -------
     IngestResult
-        ``.measurement`` (:class:`kesbrdf.measurement.Measurement`, f_r in 1/sr with
+        ``.measurement`` (:class:`kesbrdf.measure.measurement.Measurement`, f_r in 1/sr with
         uncertainty and provenance) and ``.summary`` (one row per manifest row).
 
     Raises
@@ -205,7 +205,7 @@ def ingest(manifest_path, saturation: str = "reject", progress=None) -> IngestRe
     IngestError
         Any rejected frame, missing dark or white frames (module docstring).
     """
-    from kesbrdf.measurement import Measurement
+    from kesbrdf.measure.measurement import Measurement
 
     validate_choice("saturation", saturation, SATURATION_MODES)
     manifest = read_manifest(manifest_path)

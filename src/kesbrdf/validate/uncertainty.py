@@ -3,7 +3,7 @@
 Only the ``fibre-prior`` kind carries a σ: its fit has a Laplace covariance, its file
 holds the candidate models whose spread is the model term (the pure prior and the KES
 table fitted to the same samples) and the support of the measured data, from which an
-off-support term grows (:func:`kesbrdf.prior_model.predict_with_uncertainty`,
+off-support term grows (:func:`kesbrdf.models.fibre_prior.predict_with_uncertainty`,
 docs/prior.md §5).  A ``kes`` /
 ``kes-halfdiff`` table interpolates the measured samples exactly; the file holds no
 noise estimate and no second candidate, so any σ computed from it alone would be
@@ -34,7 +34,7 @@ def predict_sigma(model, wi, wr, source: str = "model"):
     σ of ln f combines the fit noise propagated through the Laplace covariance, the
     spread between the candidates (the model, its pure prior and the stored KES table),
     the θ_d-law term and the off-support term, eq. (U1) of
-    :func:`kesbrdf.prior_model.predict_with_uncertainty` (docs/prior.md §5):
+    :func:`kesbrdf.models.fibre_prior.predict_with_uncertainty` (docs/prior.md §5):
 
     .. math:: \sigma_{\ln f}^2 = g^\top\Sigma_\theta g + \tfrac1K\sum_k(\ln f_k-\ln f)^2
               + (w_s\ln\Phi)^2 + (c\,d)^2
@@ -66,7 +66,7 @@ def predict_sigma(model, wi, wr, source: str = "model"):
             f"{', '.join(SIGMA_KINDS)} (fit with --kind fibre-prior; a KES table interpolates the samples "
             "exactly and the file holds no noise estimate)"
         )
-    from kesbrdf.prior_model import predict_with_uncertainty
+    from kesbrdf.models.fibre_prior import predict_with_uncertainty
 
     wi = np.asarray(wi, float).reshape(-1, 3)
     wr = np.asarray(wr, float).reshape(-1, 3)
@@ -80,7 +80,7 @@ def coverage(pred, sigma_log, truth) -> dict:
     r"""Fraction of truths within 1σ and 2σ of the prediction, in log space.
 
     z = |ln(t + ε) − ln(p + ε)| / σ_ln f with ε = 10⁻⁴·max t (the same floor as
-    :func:`kesbrdf.prior_model.calibration`).  A calibrated Gaussian σ gives 0.68 and
+    :func:`kesbrdf.models.fibre_prior.calibration`).  A calibrated Gaussian σ gives 0.68 and
     0.95.
 
     Returns ``{"within_1sigma", "within_2sigma", "median_sigma_log", "n"}``.

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from kesbrdf._atomic import write_text
-from kesbrdf.acquisition.sensor import RESPONSES
+from kesbrdf.measure.acquisition.sensor import RESPONSES
 from kesbrdf.errors import FormatError, validate_choice, where
 from kesbrdf.io.files import read_regular
 from kesbrdf.io.text import csv_fields, decode_text, parse_number, split_lines
