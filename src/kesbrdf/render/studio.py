@@ -33,17 +33,37 @@ import math
 
 import numpy as np
 
-__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle"]
+__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle", "meter_exposure",
+           "card_reading", "METER_SPP", "WINDOWS"]
+
+#: Samples a pixel of the meter's render (an 18 % card in the scene's light, no noise to
+#: speak of at that count: its relative noise is below 1 %, measured as the card's
+#: pixel-to-pixel spread over √(pixels)).
+METER_SPP = 64
+#: Width of the meter's render (its height keeps the still's aspect).
+METER_WIDTH = 160
+_REC709 = np.array([0.2126, 0.7152, 0.0722])
 
 #: (name, direction from the subject, distance / r, (width, height) / r, relative radiance)
 STUDIO_LIGHTS = (
-    ("key", (-0.55, 0.55, 0.80), 3.2, (1.3, 1.7), 1.0),
-    ("fill", (0.85, 0.15, 0.55), 3.5, (1.8, 1.8), 0.22),
-    ("rim", (0.35, 1.0, -0.60), 3.0, (0.35, 2.2), 1.6),
-    ("top", (0.0, 1.0, 0.1), 3.0, (1.6, 1.6), 0.35),
+    ("key", (-0.55, 0.55, 0.80), 3.2, (0.9, 1.5), 1.6),
+    ("fill", (0.85, 0.15, 0.55), 3.5, (1.4, 1.4), 0.12),
+    ("rim", (0.35, 1.0, -0.60), 3.0, (0.3, 2.2), 2.4),
+    ("kicker", (-0.9, 0.2, -0.45), 3.0, (0.25, 1.8), 2.0),
 )
 #: Radiance of the key soft box (W sr⁻¹ m⁻² per unit RGB); slightly warm white.
 KEY_RADIANCE = (6.0, 5.8, 5.5)
+
+
+#: Bright windows in the room (direction from the subject, half width, half height in
+#: gnomonic units, radiance): two tall windows either side and a wide one behind, at eye
+#: height.  A satin's narrow lobe mirrors them as thin bright streaks along the folds,
+#: which the broad soft boxes alone do not draw.
+WINDOWS = (
+    ((-1.0, 0.25, -0.15), 0.12, 0.45, 14.0),
+    ((1.0, 0.3, 0.25), 0.1, 0.4, 12.0),
+    ((0.0, 0.2, -1.0), 0.5, 0.12, 9.0),
+)
 
 
 def look_at_rectangle(mi, origin, target, size, up=(0.0, 1.0, 0.0)):
@@ -87,9 +107,9 @@ def environment_map(width: int = 512) -> np.ndarray:
     d = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
     up = d[..., 1]
     # room: floor, walls, ceiling blended smoothly by elevation
-    wall = 0.035
-    base = np.where(up < 0, 0.02 + (wall - 0.02) * np.exp(-((up / 0.15) ** 2)),
-                    0.03 + (wall - 0.03) * np.exp(-((up / 0.3) ** 2)))
+    wall = 0.012
+    base = np.where(up < 0, 0.008 + (wall - 0.008) * np.exp(-((up / 0.15) ** 2)),
+                    0.01 + (wall - 0.01) * np.exp(-((up / 0.3) ** 2)))
     img = np.repeat(base[..., None], 3, axis=-1) * np.array([1.0, 0.99, 0.97])
 
     def softbox(direction, half_w, half_h, radiance, softness=0.02):
@@ -112,5 +132,40 @@ def environment_map(width: int = 512) -> np.ndarray:
 
     boxes = (softbox((-0.35, 1.0, 0.25), 0.35, 0.25, 4.0) + softbox((0.4, 1.0, -0.3), 0.3, 0.3, 3.0)
              + softbox((0.1, 0.15, 1.0), 0.08, 0.45, 2.5))
+    for direction, half_w, half_h, radiance in WINDOWS:
+        boxes = boxes + softbox(direction, half_w, half_h, radiance, softness=0.01)
     img = img + boxes[..., None] * np.array([1.0, 0.98, 0.95])
     return img.astype(np.float32)
+
+
+def card_reading(img, resolution=None) -> float:
+    """Mean linear luminance (Rec. 709 Y) of the grey card's pixels in a linear render."""
+    from kesbrdf.render.scenes import grey_card_box
+
+    img = np.asarray(img, float)
+    rows, cols = grey_card_box(resolution or (img.shape[1], img.shape[0]))
+    return float((img[rows, cols, :3] @ _REC709).mean())
+
+
+def meter_exposure(model_path, scene: str, opts, drape=None, frame=None) -> float:
+    """The scene's exposure (stops), metered once on an 18 % grey card.
+
+    The photographer's rule: the exposure is set by a reference in the scene's light,
+    never by the subject.  The scene is loaded without its subject (cloth, mannequin,
+    dress form; :func:`kesbrdf.render.scenes.load_scene` with ``subject=False``) and with
+    the grey card at its place in the frame (``grey_card``), rendered small at
+    :data:`METER_SPP`, and the exposure is the one at which the card's mean luminance is
+    shown at 18 % after the tone curve (:func:`kesbrdf.render.post.exposure_for`).
+    Every image of that scene (stills, colourways, the reference chart) then uses it:
+    a black fabric stays black, a white one bright.
+    """
+    from dataclasses import replace
+
+    from kesbrdf.render import scenes as _scenes
+    from kesbrdf.render.post import exposure_for
+
+    w, h = (int(v) for v in opts.resolution)
+    res = (METER_WIDTH, max(8, round(METER_WIDTH * h / w)))
+    o = replace(opts, grey_card=True, denoise=False, spp=METER_SPP, resolution=res, seed=0)
+    sc = _scenes.load_scene(model_path, scene, o, drape=drape, frame=frame, subject=False)
+    return exposure_for(card_reading(_scenes.render_scene(sc, o), res), curve=opts.tonemap)
