@@ -130,8 +130,8 @@ def environment_map(width: int = 512) -> np.ndarray:
 
         return radiance * edge(x, half_w) * edge(y, half_h)
 
-    boxes = (softbox((-0.35, 1.0, 0.25), 0.35, 0.25, 4.0) + softbox((0.4, 1.0, -0.3), 0.3, 0.3, 3.0)
-             + softbox((0.1, 0.15, 1.0), 0.08, 0.45, 2.5))
+    boxes = (softbox((-0.35, 1.0, 0.25), 0.35, 0.25, 1.2) + softbox((0.4, 1.0, -0.3), 0.3, 0.3, 0.9)
+             + softbox((0.1, 0.15, 1.0), 0.05, 0.45, 1.0))
     for direction, half_w, half_h, radiance in WINDOWS:
         boxes = boxes + softbox(direction, half_w, half_h, radiance, softness=0.01)
     img = img + boxes[..., None] * np.array([1.0, 0.98, 0.95])
