@@ -26,7 +26,7 @@ CHART_CENTER = (0.0, 1.0, 0.0)
 CHART_RADIUS = 2.3
 
 
-def load_chart(model_path, opts, subject: bool = True):
+def load_chart(model_path, opts, subject: bool = True, meter=None):
     """The chart scene (Mitsuba), the studio lights of ``opts`` around it."""
     import mitsuba as mi
 
@@ -49,9 +49,10 @@ def load_chart(model_path, opts, subject: bool = True):
     if opts.grey_card:
         d["grey_card"] = _s._grey_card(opts, center, radius, view)
     d.update(_s._lights(opts, center, radius))
-    d["sensor"] = _s._camera(opts, center, radius, view)
+    d["sensor"] = _s._camera(opts, center, radius, view) if meter is None else _s._meter_camera(opts, center, radius,
+                                                                                                 view, *meter)
     integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
-    if opts.denoise:
+    if opts.denoise and meter is None:
         integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
     d["integrator"] = integ
     return mi.load_dict(d)
@@ -63,11 +64,9 @@ def meter_chart(model_path, opts) -> float:
     from kesbrdf.render import studio
     from kesbrdf.render.post import exposure_for
 
-    w, h = (int(v) for v in opts.resolution)
-    res = (studio.METER_WIDTH, max(8, round(studio.METER_WIDTH * h / w)))
-    o = replace(opts, grey_card=True, denoise=False, spp=studio.METER_SPP, resolution=res, seed=0)
-    return exposure_for(studio.card_reading(_s.render_scene(load_chart(model_path, o, subject=False), o), res),
-                        curve=opts.tonemap)
+    o = replace(opts, grey_card=True, denoise=False, spp=studio.METER_SPP, seed=0)
+    img = _s.render_scene(load_chart(model_path, o, subject=False, meter=(studio.METER_SIZE, studio.METER_SPP)), o)
+    return exposure_for(float((np.asarray(img, float)[..., :3] @ studio._REC709).mean()), curve=opts.tonemap)
 
 
 def render_chart(model_path, output, opts, exposure: float | None = None) -> tuple[Path, np.ndarray]:

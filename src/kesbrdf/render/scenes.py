@@ -385,19 +385,39 @@ def _view(opts: RenderOptions, center, radius, direction):
     return origin, dist, fov, fwd, right, up
 
 
-def _grey_card(opts: RenderOptions, center, radius, direction) -> dict:
-    """A square 18 % Lambertian card facing the camera, at :data:`GREY_CARD_NDC`."""
+def _grey_card_geometry(opts: RenderOptions, center, radius, direction):
+    """(centre, half side, camera origin, camera up) of the grey card of :func:`_grey_card`."""
     w, h = (int(v) for v in opts.resolution)
     origin, dist, fov, fwd, right, up = _view(opts, center, radius, direction)
     depth = dist - GREY_CARD_FORWARD * radius
     t = math.tan(math.radians(fov) / 2) * depth
     hw, hh = (t * w / h, t) if w >= h else (t, t * h / w)
     c = origin + depth * fwd + GREY_CARD_NDC[0] * hw * right + GREY_CARD_NDC[1] * hh * up
-    half = 0.5 * GREY_CARD_SIZE * min(hw, hh)
+    return c, 0.5 * GREY_CARD_SIZE * min(hw, hh), origin, up
+
+
+def _grey_card(opts: RenderOptions, center, radius, direction) -> dict:
+    """A square 18 % Lambertian card facing the camera, at :data:`GREY_CARD_NDC`."""
+    c, half, origin, up = _grey_card_geometry(opts, center, radius, direction)
     T = mi.ScalarTransform4f
     return {"type": "rectangle",
-            "to_world": T().look_at(origin=c.tolist(), target=(c - fwd).tolist(), up=up.tolist()) @ T().scale([half, half, 1.0]),
+            "to_world": T().look_at(origin=c.tolist(), target=origin.tolist(), up=up.tolist()) @ T().scale([half, half, 1.0]),
             "bsdf": _diffuse((GREY_CARD_ALBEDO,) * 3)}
+
+
+#: The exposure meter's view: the card's inner METER_FILL of its side fills the frame.
+METER_FILL = 0.7
+
+
+def _meter_camera(opts: RenderOptions, center, radius, direction, size: int, spp: int) -> dict:
+    """A camera at the still's viewpoint aimed at the grey card, the card filling its
+    ``size`` × ``size`` frame (the meter of :func:`kesbrdf.render.studio.meter_exposure`)."""
+    c, half, origin, up = _grey_card_geometry(opts, center, radius, direction)
+    fov = 2 * math.degrees(math.atan(METER_FILL * half / float(np.linalg.norm(c - origin))))
+    return {"type": "perspective", "fov": fov,
+            "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=c.tolist(), up=up.tolist()),
+            "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb", "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent", "sample_count": int(spp), "seed": 0}}
 
 
 def grey_card_box(resolution, margin: float = 0.25) -> tuple[slice, slice]:
@@ -412,7 +432,8 @@ def grey_card_box(resolution, margin: float = 0.25) -> tuple[slice, slice]:
 
 
 def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: int | None = None,
-               cloth_bsdf: dict | None = None, framing=None, subject: bool = True) -> "mi.Scene":
+               cloth_bsdf: dict | None = None, framing=None, subject: bool = True,
+               meter: tuple[int, int] | None = None) -> "mi.Scene":
     """Build and load one scene.
 
     Parameters
@@ -431,6 +452,9 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         False leaves out the cloth and its props (mannequin, dress form) but keeps the
         framing, floor, backdrop, lights and grey card: the exposure meter's scene
         (:func:`kesbrdf.render.studio.meter_exposure`).
+    meter : (size, spp), optional
+        Replace the camera by the exposure meter's: aimed at the grey card from the
+        still's viewpoint, the card filling a size × size frame (:func:`_meter_camera`).
     """
     validate_choice("scene", scene, SCENES)
     opts.validate()
@@ -515,9 +539,10 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         if opts.grey_card:
             d["grey_card"] = _grey_card(opts, center, radius, view_dir)
         d.update(_lights(opts, center, radius, key_dir))
-        d["sensor"] = _camera(opts, center, radius, view_dir)
+        d["sensor"] = (_camera(opts, center, radius, view_dir) if meter is None
+                       else _meter_camera(opts, center, radius, view_dir, *meter))
         integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
-        if opts.denoise:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
+        if opts.denoise and meter is None:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
             integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
         d["integrator"] = integ
         return mi.load_dict(d)
