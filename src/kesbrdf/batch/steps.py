@@ -46,9 +46,12 @@ DEPENDS = {
     "preview": ("fit",),
 }
 RENDER_STEPS = ("preview",)
-#: Preview render settings (small and fast: one tile of the contact sheet).
-PREVIEW_DEFAULTS = {"scene": "sphere", "spp": 16, "resolution": [128, 96],
-                    "colourway_spp": 4, "colourway_resolution": [64, 48], "colourways": 6}
+#: Preview render settings (one tile of the contact sheet): 256 × 192 in the studio
+#: (soft boxes, windows, ACES, exposure metered on the grey card, docs/rendering.md
+#: "Studio"), denoised by OIDN when installed, so a satin's highlight can be judged.
+PREVIEW_DEFAULTS = {"scene": "sphere", "spp": 16, "resolution": [256, 192],
+                    "colourway_spp": 4, "colourway_resolution": [128, 96], "colourways": 6}
+PREVIEW_DENOISE_MIN_PIXELS = 128 * 96
 
 
 def closure(steps) -> tuple[str, ...]:
@@ -353,10 +356,24 @@ def step_preview(inputs: dict, params: dict, out: Path) -> dict:
     from kesbrdf.render import scenes
     from kesbrdf.render.colourways import DEFAULT_COLOURWAYS, render_colourways
 
+    import importlib.util
+    from dataclasses import replace
+
+    from kesbrdf.render.studio import meter_exposure
+
     model_path = inputs["fit/model.kes.json"]
-    opts = scenes.RenderOptions(spp=int(params["spp"]), resolution=tuple(params["resolution"]))
+    oidn = importlib.util.find_spec("pyoidn") is not None
+
+    def denoise(res):  # below 128 x 96 pixels OIDN's set-up costs more than a few more spp
+        return oidn and int(res[0]) * int(res[1]) >= PREVIEW_DENOISE_MIN_PIXELS
+
+    res = tuple(params["resolution"])
+    opts = scenes.RenderOptions(spp=int(params["spp"]), resolution=res, env="studio-hdr", light="studio",
+                                tonemap="aces", denoise=denoise(res))
+    opts = replace(opts, exposure=meter_exposure(model_path, params["scene"], opts))
     scenes.render_still(model_path, params["scene"], out / "preview.png", opts)
-    copts = scenes.RenderOptions(spp=int(params["colourway_spp"]), resolution=tuple(params["colourway_resolution"]))
+    cres = tuple(params["colourway_resolution"])
+    copts = replace(opts, spp=int(params["colourway_spp"]), resolution=cres, denoise=denoise(cres))
     n = int(params["colourways"])
     render_colourways(model_path, out / "colourways.png", copts, scene=params["scene"],
                       colourways=DEFAULT_COLOURWAYS[:n], columns=min(n, 3))

@@ -159,13 +159,25 @@ def meter_exposure(model_path, scene: str, opts, drape=None, frame=None) -> floa
     Every image of that scene (stills, colourways, the reference chart) then uses it:
     a black fabric stays black, a white one bright.
     """
+    import json
     from dataclasses import replace
 
     from kesbrdf.render import scenes as _scenes
     from kesbrdf.render.post import exposure_for
 
-    o = replace(opts, grey_card=True, denoise=False, spp=METER_SPP, seed=0)
+    o = replace(opts, grey_card=True, denoise=False, spp=METER_SPP, seed=0, base_color=None, lobe_tint=None)
+    # without a drape the metered scene (no subject) does not depend on the model: one
+    # reading per scene and light set serves every fabric of a batch
+    key = None if drape is not None else json.dumps([scene, o.to_json()], sort_keys=True, default=str)
+    if key is not None and key in _METERED:
+        return _METERED[key]
     sc = _scenes.load_scene(model_path, scene, o, drape=drape, frame=frame, subject=False,
                             meter=(METER_SIZE, METER_SPP))
     img = _scenes.render_scene(sc, o)
-    return exposure_for(float((np.asarray(img, float)[..., :3] @ _REC709).mean()), curve=opts.tonemap)
+    e = exposure_for(float((np.asarray(img, float)[..., :3] @ _REC709).mean()), curve=opts.tonemap)
+    if key is not None:
+        _METERED[key] = e
+    return e
+
+
+_METERED: dict = {}
