@@ -4,27 +4,30 @@ Everything is generated here (nothing is downloaded).  World space is the render
 y up, the camera in front of the subject on +z.
 
 Lights (:func:`studio_lights`), placed around the subject's centre ``c`` at distances
-in units of its bounding radius ``r``, the way a fashion shoot is lit:
+in units of its bounding radius ``r``, the way satin is lit for a fashion shoot:
 
 =========  ============================  ===========  ==========================
 light      direction from c (x, y, z)    size (r)     radiance (relative)
 =========  ============================  ===========  ==========================
-key        (−0.55, 0.55, 0.80), 3.2 r   1.3 × 1.7    1.0  (soft box, camera left)
-fill       (0.85, 0.15, 0.55), 3.5 r    1.8 × 1.8    0.22 (large, dim, right)
-rim        (0.45, 0.50, −0.80), 3.0 r   0.35 × 2.2   1.6  (strip light behind)
-top        (0.0, 1.0, 0.1), 3.0 r       1.6 × 1.6    0.35 (overhead)
+key        (−0.55, 0.55, 0.80), 3.2 r   0.9 × 1.5    1.6  (soft box, camera left)
+fill       (0.85, 0.15, 0.55), 3.5 r    1.4 × 1.4    0.12 (large, dim, right)
+rim        (0.35, 1.0, −0.60), 3.0 r    0.3 × 2.2    2.4  (strip light behind)
+kicker     (−0.9, 0.2, −0.45), 3.0 r    0.25 × 1.8   2.0  (strip, behind left, low)
 =========  ============================  ===========  ==========================
 
-The rectangles face the subject.  A satin's narrow lobe reflects the soft boxes as
-elongated highlights that slide along the folds; the rim strip draws the sheen on the
-far edges of folds.  The absolute scale :data:`KEY_RADIANCE` makes a white diffuse
-card facing the key read about 0.7 after the ACES curve at exposure 0.
+The rectangles face the subject; their solid angles do not depend on r.  A satin's
+narrow lobe reflects the key as an elongated highlight that slides along the folds;
+the rim and kicker strips draw thin sheen lines on the far edges of folds.
 
 Environment (:func:`environment_map`, kind ``"studio-hdr"``): a latitude–longitude HDR
-of a dark grey room (floor 0.02, walls 0.035, ceiling 0.03) with the reflections of
-two large overhead soft boxes (radiance 4) and a vertical strip behind the camera
-(radiance 2.5): what a mirror-like lobe sees away from the area lights.  Mitsuba's
-``sunsky`` emitter (present in Mitsuba ≥ 3.6) can be used instead (``env="sunsky"``).
+of a near-black room (floor 0.008, walls 0.012) with two dim overhead soft boxes, a dim
+strip behind the camera and three bright windows at eye height (:data:`WINDOWS`), which
+a glossy lobe mirrors as thin streaks.  Mitsuba's ``sunsky`` emitter (Mitsuba ≥ 3.6)
+can be used instead (``env="sunsky"``).
+
+Exposure (:func:`meter_exposure`): metered once per scene on an 18 % grey card in the
+scene's light, the subject left out, and shown at 18 % after the ACES curve; every
+image of the scene shares it (docs/rendering.md, "Studio").
 """
 
 from __future__ import annotations
