@@ -7,7 +7,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from kesbrdf.plotting.report import REPORT_FIGURES, build_report, collect, write_report
+from kesbrdf.plotting.report import REPORT_FIGURES, ReportInputs, build_report, collect, write_report
 
 #: The model reproduces its in-plane input samples to round-off (DESIGN §4); f_r is O(1)/sr.
 ROUND_TRIP_RMSE = 1e-12
@@ -54,8 +54,9 @@ def _parse(text):
 @pytest.fixture(scope="module")
 def report_text(satin_model, satin_measurement, satin_ref, tmp_path_factory):
     path = tmp_path_factory.mktemp("rep") / "report.html"
-    write_report(path, satin_model, satin_measurement, satin_ref, metrics=METRICS, diagnostics=DIAGNOSTICS,
-                 title="Test <report>", figure_options={"6": {"n": 31}, "3b": {"n_gamma": 9, "n_psi": 5}}, dpi=40)
+    write_report(path, ReportInputs(satin_model, satin_measurement, satin_ref, metrics=METRICS, diagnostics=DIAGNOSTICS,
+                                    title="Test <report>", figure_options={"6": {"n": 31}, "3b": {"n_gamma": 9, "n_psi": 5}},
+                                    dpi=40))
     assert [p.name for p in path.parent.iterdir()] == ["report.html"]  # one file, nothing else
     return path.read_text(encoding="utf-8")
 
@@ -98,13 +99,13 @@ def test_report_has_provenance(report_text, satin_model):
 
 
 def test_missing_inputs_become_notes(satin_measurement):
-    text = build_report(measurement=satin_measurement, metrics={"a": 1}, figures=("3a", "4"), dpi=30)
+    text = build_report(ReportInputs(measurement=satin_measurement, metrics={"a": 1}, figures=("3a", "4"), dpi=30))
     assert len(_parse(text).imgs) == 1
     assert "Figure 4 not drawn: figure 4: expected a model, got none" in text
 
 
 def test_figure_dir_gets_the_figures(satin_model, tmp_path):
-    write_report(tmp_path / "r.html", satin_model, figures=("5",), figure_dir=tmp_path / "figs", dpi=30)
+    write_report(tmp_path / "r.html", ReportInputs(satin_model, figures=("5",), figure_dir=tmp_path / "figs", dpi=30))
     assert (tmp_path / "figs" / "fig5.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -115,15 +115,15 @@ def test_chi2_halfdiff_sampling(render_module, tmp_path, monkeypatch, theta):
 
 
 def test_report_embeds_the_panels(render_module, tmp_path):
-    from kesbrdf.plotting.report import build_report
+    from kesbrdf.plotting.report import ReportInputs, build_report
     from kesbrdf.render.compare import compare_render
 
     r = compare_render("satin-ward", "paper", "sphere", _opts(), output=tmp_path / "p.png", noise_floor=False)
-    text = build_report(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}])
+    text = build_report(ReportInputs(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}]))
     assert "Reference vs model renders" in text
     assert text.count('<figure class="compare">') == 1  # the missing panel is skipped
     assert f"FLIP {r['flip']:.3f}" in text
-    assert "Reference vs model renders" not in build_report(figures=())
+    assert "Reference vs model renders" not in build_report(ReportInputs(figures=()))
 
 
 def test_demo_comparisons_step(render_module, tmp_path, monkeypatch):
