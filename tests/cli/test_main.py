@@ -75,7 +75,10 @@ def test_demo_quick(tmp_path):
     assert main(["demo", "-o", str(out), "--quick"]) == 0
     v = json.loads((out / "validation.json").read_text())
     assert v["round_trip"]["metrics"]["all"]["rmse"] < 1e-9
-    assert (out / "model.kes.json").exists()
+    # issue 19: one fit; the one model file is the kind the fit chose, and the report names it
+    assert sorted(p.name for p in out.glob("model.*.json")) == [f"model.{v['model_kind']}.json"]
+    assert v["fit_report"]["kind"] == v["model_kind"]
+    assert f"<td class=txt>{v['model_sha256']}</td>" in (out / "report.html").read_text()
     # issue 9: the default model against the baselines, one verdict per case, consistent
     # with the stored RMSEs; the report carries the comparison, uncertainty and plan
     dvb = v["default_vs_baselines"]

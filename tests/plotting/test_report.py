@@ -124,3 +124,22 @@ def test_summary_collects_key_numbers(report_text):
     assert "reciprocity error" in summary and "3.25e-16" in summary
     assert re.search(r"albedo, max per channel</td><td[^>]*>.*1\.25", summary)
     assert "incident directions with albedo &gt; 1</td><td>1<" in summary
+
+
+def test_report_names_its_model_at_the_top(satin_model, satin_measurement):
+    """Issue 19: the report says which model it is about (kind, content hash) and why the
+    fit chose it, before anything else, and the hash is the model's content hash."""
+    import kesbrdf
+    from kesbrdf.pipeline import model_sha256
+
+    model, fit_report = kesbrdf.fit(satin_measurement, kind="kes")
+    text = build_report(ReportInputs(model, figures=(), notes=["renders skipped: a one-line reason"]))
+    head = text[: text.index("<h2 id=inputs>")]
+    digest = model_sha256(model)
+    assert len(digest) == 64 and f"<td class=txt>{digest}</td>" in head
+    assert "<td class=txt>kes</td>" in head and f"<td class=txt>{fit_report.reason}</td>" in head
+    assert "renders skipped: a one-line reason" in head
+    # a different model (another table) has another hash; equal content, equal hash
+    assert model_sha256(satin_model) != digest or np.array_equal(satin_model.table, model.table)
+    twin = kesbrdf.fit(satin_measurement, kind="kes")[0]
+    assert model_sha256(twin) == digest

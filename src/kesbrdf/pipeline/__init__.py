@@ -136,9 +136,7 @@ def protocol_of(measurement) -> str | None:
     m = measurement
     if len(m) == 0 or not np.all(m.is_in_plane):
         return None
-    ti = np.arccos(np.clip(m.wi[:, 2], -1.0, 1.0))
-    tr = np.arccos(np.clip(m.wr[:, 2], -1.0, 1.0))
-    return "paper" if np.allclose(ti + tr, np.pi / 2, atol=1e-6) else "dense"
+    return "paper" if np.allclose(m.theta_i + m.theta_r, np.pi / 2, atol=1e-6) else "dense"
 
 
 # -- fit --------------------------------------------------------------------------------

@@ -245,20 +245,21 @@ def _render(v, path: tuple = (), depth: int = 0) -> str:
 def _model_summary(model) -> dict:
     if model is None:
         return {}
+    table = getattr(model, "table", None)  # kinds without a table (fibre-prior) have no shape to show
     out = {
         "kind": model.kind,
         "channels": ", ".join(model.channels),
         "orientations": model.parameters.get("orientations"),
-        "table shape": " × ".join(str(n) for n in np.shape(model.table)),
+        "table shape": None if table is None else " × ".join(str(n) for n in np.shape(table)),
     }
     if model.kind == "kes":
         out["table (n_phi × n_gamma)"] = f"{len(model.phi_grid)} × {len(model.gamma_grid)}"
         out["γ_max (°)"] = round(math.degrees(float(np.max(model.gamma_grid))), 6)
     return {
         **out,
-        "body c (1/sr)": np.asarray(model.body, float).tolist(),
-        "input": (model.input_info or {}).get("name"),
-        "sample": (model.input_info or {}).get("sample"),
+        "body c (1/sr)": None if getattr(model, "body", None) is None else np.asarray(model.body, float).tolist(),
+        "input": (getattr(model, "input_info", None) or {}).get("name"),
+        "sample": (getattr(model, "input_info", None) or {}).get("sample"),
     }
 
 
