@@ -220,6 +220,8 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
     if strict:
         options["fallback"] = "error"
     model = cls.fit_measurement(m, **options)
+    if hasattr(model, "remember_fit"):
+        model.remember_fit(m, name, options)
     used = int(np.count_nonzero(mask))
     unused = len(m) - used
     report = FitReport(

@@ -210,7 +210,7 @@ def _read_m(inputs):
 
 
 def _load_model(inputs):
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     return load(inputs["fit/model.kes.json"])
 

@@ -20,7 +20,7 @@ def add_arguments(p):
 def run(args) -> int:
     from kesbrdf._atomic import write_text
     from kesbrdf.io.measurement_csv import read_measurement
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.validate.compare import validate
 
     if args.json_out:

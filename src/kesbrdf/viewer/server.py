@@ -121,7 +121,7 @@ _MODEL_SUFFIXES = (".kes.json",)
 def load_model_json(path: str | os.PathLike) -> dict:
     """Read and check a model file; return its JSON document unchanged.
 
-    Uses :func:`kesbrdf.models.kes.load` for the full check when it is available, so the
+    Uses :func:`kesbrdf.io.model_file.load_model` for the full check first, so the
     error is the one the CLI gives for the same file.
 
     Raises
@@ -129,13 +129,10 @@ def load_model_json(path: str | os.PathLike) -> dict:
     ModelError
         Not JSON, not a kesbrdf model, or an unknown format version.
     """
+    from kesbrdf.io.model_file import load_model
+
     path = Path(path)
-    try:
-        from kesbrdf.models import kes as model_module
-    except ImportError:  # core model module not available: the format check below stands
-        model_module = None
-    if model_module is not None and hasattr(model_module, "load"):
-        model_module.load(path)  # first, so that the error is the CLI's for the same file
+    load_model(path)  # first, so that the error is the CLI's for the same file
     from kesbrdf.io.text import decode_text
 
     text = decode_text(path.read_bytes(), path)
