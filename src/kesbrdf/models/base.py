@@ -101,6 +101,7 @@ __all__ = [
     "KIND_MODULES",
     "FIT_MODULES",
     "AUTO_CANDIDATES",
+    "TABLE_KIND",
 ]
 
 #: Where each kind's class lives; imported on first use so that a kind's heavy
@@ -122,6 +123,10 @@ FIT_MODULES: dict[str, str] = {
 #: uses every row wins, else the one that uses the most (ties: the earlier).  Simpler
 #: models first, so the paper's protocol gets the paper's kind.
 AUTO_CANDIDATES: list[str] = ["kes", "kes-halfdiff", "scattered"]
+
+#: The kind whose models are the (φ, γ) table format (:mod:`kesbrdf.models.table`):
+#: :meth:`ReflectanceModel.table_view` returns one, built by its class's ``tabulate``.
+TABLE_KIND = "kes"
 
 _REGISTRY: dict[str, type] = {}
 _FITTERS: dict[str, type] = {}
@@ -211,12 +216,10 @@ class ReflectanceModel:
         Figures that read the table (Fig. 5), the table shaders and exports use it; the
         base class tabulates through :meth:`evaluate` so every kind has one.
         """
-        from kesbrdf.models.table import tabulate
-
         key = (n_phi, n_gamma)
         cache = self.__dict__.setdefault("_table_views", {})
         if key not in cache:
-            cache[key] = tabulate(self, n_phi, n_gamma)
+            cache[key] = kind_class(TABLE_KIND).tabulate(self, n_phi, n_gamma)
         return cache[key]
 
     def predict_sigma(self, wi, wr):

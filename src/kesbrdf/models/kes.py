@@ -235,12 +235,23 @@ class Model(ReflectanceModel):
         """The model itself: its table is the (φ, γ) table."""
         return self
 
+    @classmethod
+    def tabulate(cls, model, n_phi=None, n_gamma=None) -> "Model":
+        """The (φ, γ) table of any model through its evaluation (:func:`kesbrdf.models.table.tabulate`)."""
+        from kesbrdf.models.table import tabulate
+
+        return tabulate(model, n_phi, n_gamma)
+
     def describe(self) -> str:
-        how = self.parameters.get("tabulated_from")
-        how = f"tabulated from a {how!r} model" if how else (
-            "scattered fit" if self.parameters.get("fit") == "scattered" else f"{self.orientations} orientations")
-        return (f"kes table {self.phi_grid.size} x {self.gamma_grid.size} over (phi, gamma) up to "
-                f"{math.degrees(self.gamma_max):.3g} deg, {how}, channels {', '.join(self.channels)}")
+        p, d = self.parameters, self.diagnostics
+        table = (f"kes table {self.phi_grid.size} x {self.gamma_grid.size} over (phi, gamma) up to "
+                 f"{math.degrees(self.gamma_max):.3g} deg, channels {', '.join(self.channels)}")
+        if p.get("tabulated_from"):
+            return f"{table}, tabulated from a {p['tabulated_from']!r} model"
+        if p.get("fit") == "scattered":
+            return (f"scattered fit of {d.get('n_used', '?')} samples, warp at {float(p.get('warp_offset_deg', 0.0)):.1f} deg "
+                    f"({p.get('warp_offset_rule', 'given')}), symmetry {p.get('symmetry')}, body {self.body.tolist()}; {table}")
+        return f"{self.orientations} orientations, {len(self.gamma_nodes)} gamma nodes; {table}"
 
     def refit_options(self) -> dict:
         """As the base class, without ``orientations`` (the subset says how many it has)."""
