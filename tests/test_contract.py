@@ -140,7 +140,7 @@ def run_contract(model_path: Path, meas_path: Path, out: Path, capsys, monkeypat
                    [out / "s.png"]),
     }
     for fig in FIGURES:
-        commands[f"plot {fig}"] = (["plot", str(model_path), "--figure", fig, "-o", str(out / f"f{fig}.png")],
+        commands[f"plot {fig}"] = (["plot", str(model_path), "--figure", fig, "-o", str(out / f"f{fig}.png"), "--dpi", "40"],
                                    [out / f"f{fig}.png"])
     endings = {"rgl-bsdf": ".bsdf", "rgl-bsdf-spectral": ".bsdf", "mitsuba-scene": ".xml", "gltf": ".gltf",
                "glb": ".glb", "mtlx": ".mtlx", "usd": ".usda", "brdf-explorer": ".brdf"}

@@ -125,6 +125,8 @@ class Model(ReflectanceModel):
     kind: ClassVar[str] = "kes"
     mappings: ClassVar[tuple[str, ...]] = MAPPINGS
     array_names: ClassVar[tuple[str, ...]] = _ARRAYS
+    #: kind="auto" compares the paper-protocol KES choice with the prior by leave-one-orientation-out
+    auto_compare: ClassVar[str | None] = "loo"
     fit_options: ClassVar[tuple[str, ...]] = (
         "orientations", "fallback", "body", "noise_floor", "interpolation", "n_phi", "gamma_step",
         "normalisation", "extrapolation",
