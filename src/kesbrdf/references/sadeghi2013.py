@@ -101,6 +101,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
+from kesbrdf.references.base import ReferenceBRDF
 
 __all__ = [
     "Family",
@@ -440,7 +441,7 @@ def _polar(x, y):
 # ---------------------------------------------------------------------------------------
 
 
-class Sadeghi2013:
+class Sadeghi2013(ReferenceBRDF):
     """Microcylinder cloth BRDF (Sadeghi et al. 2013), callable as ``f(wi, wr)``.
 
     .. math::
@@ -479,6 +480,7 @@ class Sadeghi2013:
     """
 
     channels = ("R", "G", "B")
+    error = Sadeghi2013Error
 
     def __init__(
         self,
@@ -670,21 +672,9 @@ class Sadeghi2013:
                 q = q + weight * np.maximum(np.cos(np.arctan2(t_r, n_r)), 0.0)
         return q
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        """Evaluate f_r for directions ``wi`` (to the light) and ``wr`` (to the viewer).
-
-        Parameters
-        ----------
-        wi, wr : array_like, shape (..., 3)
-            Unit vectors in the fabric frame; leading axes broadcast.
-
-        Returns
-        -------
-        ndarray, shape (..., 3)
-            f_r in 1/sr per RGB channel. Zero when either direction is at or below the
-            horizon (z ≤ 0) or Q ≤ 0; NaN where an input component is NaN.
-        """
-        wi, wr = self._directions(wi, wr)
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r in 1/sr per RGB channel, (n, 3), of unit pairs above the horizon; 0 where
+        Q ≤ 0.  The horizon, NaN and broadcasting are :class:`ReferenceBRDF`'s."""
         shape = wi.shape[:-1]
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             surf_i = np.zeros(shape)
@@ -710,10 +700,7 @@ class Sadeghi2013:
                 num_r = surf_r[..., None] + vol_r[0][..., None] * A_warp + vol_r[1][..., None] * A_weft
                 f_rev = num_r / (q_i * wr[..., 2])[..., None]
                 f = 0.5 * (f + np.where((q_i > 0)[..., None], f_rev, 0.0))
-        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
-        f = np.where(above[..., None], f, 0.0)
-        nan_in = np.isnan(wi).any(axis=-1) | np.isnan(wr).any(axis=-1)
-        return np.where(nan_in[..., None], np.nan, f)
+        return f
 
 
 # ---------------------------------------------------------------------------------------
