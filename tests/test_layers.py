@@ -31,7 +31,7 @@ PACKAGE = SRC / "kesbrdf"
 #: (layer name, module-name prefixes).  A module belongs to the first layer with the
 #: longest matching prefix.
 LAYERS = [
-    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry",
+    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry", "kesbrdf.optics",
               "kesbrdf.models.mappings", "kesbrdf.references.marginal2d"]),
     ("measurement", ["kesbrdf.measure", "kesbrdf.measure.measurement"]),
     ("io", ["kesbrdf.io", "kesbrdf.models.base", "kesbrdf.references", "kesbrdf.measure.gonio",

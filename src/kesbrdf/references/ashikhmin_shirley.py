@@ -40,6 +40,7 @@ import math
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.optics import schlick_weight
 from kesbrdf.references.base import ReferenceBRDF, default_channels
 
 __all__ = ["AshikhminShirley"]
@@ -163,8 +164,7 @@ class AshikhminShirley(ReferenceBRDF):
                 * lobe / (k_dot_h * np.maximum(cos_i, cos_r))
             )
             # Eq. 3: Schlick's Fresnel, per channel
-            schlick = (1.0 - k_dot_h) ** 5
-            fresnel = self.R_s + (1.0 - self.R_s) * schlick[..., None]
+            fresnel = self.R_s + (1.0 - self.R_s) * schlick_weight(k_dot_h)[..., None]
             # Eq. 5: coupled diffuse term, per channel
             diffuse_shape = (1.0 - (1.0 - 0.5 * cos_i) ** 5) * (1.0 - (1.0 - 0.5 * cos_r) ** 5)
             diffuse = (28.0 / (23.0 * math.pi)) * self.R_d * (1.0 - self.R_s) * diffuse_shape[..., None]

@@ -101,6 +101,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
+from kesbrdf.optics import fresnel_dielectric
 from kesbrdf.references.base import ReferenceBRDF
 
 __all__ = [
@@ -387,22 +388,6 @@ def _validate_name(kind: str, name: object, valid: tuple[str, ...]) -> str:
 # ---------------------------------------------------------------------------------------
 # Thread scattering pieces
 # ---------------------------------------------------------------------------------------
-
-
-def fresnel_dielectric(cos_theta, eta: float) -> np.ndarray:
-    """Exact unpolarised Fresnel reflectance from air into a dielectric of index ``eta`` > 1.
-
-    .. math:: F_r = \\tfrac12 (r_s^2 + r_p^2)
-
-    >>> float(fresnel_dielectric(1.0, 1.5).round(6))
-    0.04
-    """
-    cos_i = np.clip(np.asarray(cos_theta, float), 0.0, 1.0)
-    sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta)
-    cos_t = np.sqrt(np.maximum(1.0 - sin_t2, 0.0))
-    r_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    r_p = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-    return 0.5 * (r_s * r_s + r_p * r_p)
 
 
 def _gaussian(gamma: float, x):
