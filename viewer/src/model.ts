@@ -2,7 +2,7 @@
  * The kesbrdf model file (docs/formats.md, format version 1) and its evaluation.
  *
  * Everything here follows the recipe of docs/formats.md "How to evaluate a model"
- * exactly; the GLSL chunk in shaders/kes_brdf.glsl is the same recipe on the GPU.
+ * exactly; the GLSL in src/kesbrdf/shaders/kes_brdf.glsl is the same recipe on the GPU.
  * Fabric frame: x = warp, y = weft, z = normal; wi toward the light, wr toward the
  * viewer; radians; f_r in 1/sr.
  */
