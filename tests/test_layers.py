@@ -1,4 +1,4 @@
-"""The package's import graph respects its layers (DESIGN §6, docs/models.md).
+"""The package's import graph respects its layers (docs/architecture.md, "Layers", docs/models.md).
 
 Every module of ``src/kesbrdf`` is parsed with :mod:`ast` (imports inside functions
 count too: a lazy import is still a dependency), and the test fails when

@@ -320,7 +320,7 @@ function paperEvaluate(m: KesModel, wi: Vec3, wr: Vec3, out: Float64Array, body:
 
 /**
  * f_r = c + fade(γ)·q/w (1/sr) of the model for one pair, per channel (docs/formats.md steps 1–3).
- * `body` replaces the model's body term when given (DESIGN §5 colourways).
+ * `body` replaces the model's body term when given (colourways: docs/method.md, "Colour").
  */
 export function evaluate(
   m: KesModel,

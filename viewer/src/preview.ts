@@ -193,7 +193,7 @@ export class Preview {
     this.invalidate();
   }
 
-  /** Body colour (linear RGB albedo) or null for the model's own body term (DESIGN §5: f_body = base_color/π). */
+  /** Body colour (linear RGB albedo) or null for the model's own body term (docs/method.md, "Colour": f_body = base_color/π). */
   setBaseColor(linearRGB: [number, number, number] | null): void {
     this.bodyOverride = linearRGB ? [linearRGB[0] / Math.PI, linearRGB[1] / Math.PI, linearRGB[2] / Math.PI] : null;
     this.updateBody();

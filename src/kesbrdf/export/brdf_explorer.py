@@ -15,7 +15,7 @@ lit-sphere views show the model, not a fit.
 
 Parameters exposed in BRDF Explorer: ``bool halfvector`` (mapping; default: the
 model's ``deviation``), ``float scale`` (multiplies f_r, default 1), ``color tint``
-(multiplies the body term c, default white: a colourway, DESIGN §5).
+(multiplies the body term c, default white: a colourway, docs/method.md, "Colour").
 
 Constant-array size.  BRDF Explorer has no texture slot for an analytic BRDF, and
 GLSL drivers compile very large constant arrays slowly or not at all, so the table is

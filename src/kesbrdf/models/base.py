@@ -159,7 +159,7 @@ class ReflectanceModel:
         raise NotImplementedError
 
     def mirror_behaviour(self) -> dict:
-        """How the lobe varies with azimuth at the mirror direction (DESIGN §4); {} if n/a."""
+        """How the lobe varies with azimuth at the mirror direction (docs/method.md, "Diagnostics"); {} if n/a."""
         return {}
 
     def to_payload(self) -> tuple[dict, dict[str, np.ndarray]]:  # pragma: no cover

@@ -1,6 +1,6 @@
 r"""A few-parameter woven-cloth prior and its fit (docs/prior.md).
 
-The model (``shared/reference/fibre-prior.md``, after Irawan & Marschner 2012)
+The model (docs/prior.md, after Irawan & Marschner 2012)
 ---------------------------------------------------------------------------------
 
 .. math::
