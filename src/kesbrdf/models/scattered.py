@@ -21,7 +21,7 @@ plus a Lambertian body c ≥ 0.  The table is then built exactly as
    grazing angles; zero beyond γ = π/2);
 2. linear interpolation in q onto the table's uniform γ grid;
 3. KES on K = 1/q over the whole circle of deviation azimuths
-   (:func:`kesbrdf.models.interpolation.interpolate_circle`, through ``kesbrdf.models.kes._fill_table`` with
+   (:func:`kesbrdf.models.interpolation.interpolate_circle`, through :func:`kesbrdf.models.kes.fill_table` with
    ``fallback="log"`` where K(φ) ≤ 0);
 4. body split: lobe = max(q(φ, γ) − c·w(γ), 0).
 
