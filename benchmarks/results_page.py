@@ -73,12 +73,17 @@ def scalar_table(items) -> list[str]:
     return lines
 
 
-def record_table(records: dict) -> list[str]:
-    columns: list[str] = []
+def _keys(records: dict) -> list[str]:
+    """The keys of all records, in first-seen order."""
+    keys: list[str] = []
     for rec in records.values():
-        for k in rec:
-            if k not in columns:
-                columns.append(k)
+        keys += [k for k in rec if k not in keys]
+    return keys
+
+
+def record_table(records: dict) -> list[str]:
+    """A table with a row per record and a column per key."""
+    columns = _keys(records)
     lines = ["| | " + " | ".join(fmt(c) for c in columns) + " |", "|---" * (len(columns) + 1) + "|"]
     for name, rec in records.items():
         lines.append(f"| {fmt(name)} | " + " | ".join(fmt(rec[c]) if c in rec else "" for c in columns) + " |")
@@ -87,15 +92,7 @@ def record_table(records: dict) -> list[str]:
 
 def transposed_table(records: dict) -> list[str]:
     """A record table with a row per key and a column per record (many keys, few records)."""
-    keys: list[str] = []
-    for rec in records.values():
-        for k in rec:
-            if k not in keys:
-                keys.append(k)
-    lines = ["| | " + " | ".join(fmt(n) for n in records) + " |", "|---" * (len(records) + 1) + "|"]
-    for k in keys:
-        lines.append(f"| {fmt(k)} | " + " | ".join(fmt(r[k]) if k in r else "" for r in records.values()) + " |")
-    return lines
+    return record_table({k: {name: rec[k] for name, rec in records.items() if k in rec} for k in _keys(records)})
 
 
 def render(value, title: str, level: int) -> list[str]:
