@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 OUT ?= out/demo
-# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, DESIGN §7): Debian's libllvm19, installed by `make system`.
+# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, docs/architecture.md, "Tools it runs on"): Debian's libllvm19, installed by `make system`.
 export DRJIT_LIBLLVM_PATH ?= /usr/lib/$(shell uname -m)-linux-gnu/libLLVM-19.so
 export MPLBACKEND ?= Agg
 
