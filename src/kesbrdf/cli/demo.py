@@ -4,7 +4,7 @@ images → values (ingest) → model → validation → the paper's figures → 
 exports → renders (sphere, draped garment, drape animation, colourways), each stage
 when its optional part is installed (``make demo`` installs them all).  The steps are
 the pipeline's (:mod:`kesbrdf.pipeline`, docs/pipeline.md): the model is fitted ONCE,
-by the rule of ``kesbrdf fit``, saved as ``model.<kind>.json``, and every later step
+by the rule of ``kesbrdf fit``, saved as ``model.kes.json`` (any kind), and every later step
 reads that model; a step that cannot use it prints a one-line note and the rest runs.
 """
 
@@ -138,9 +138,12 @@ def run(args) -> int:
         stderr(f"    {report.comparison_summary()}")
     for w in report.warnings:
         stderr(f"    warning: {w}")
-    model_path = fitted.save(out / f"model.{fitted.kind}.json")
+    # .kes.json is the model-file ending of every kind (docs/formats.md): a fixed name the
+    # docs' commands can use, whichever kind the fit chose
+    model_path = fitted.save(out / "model.kes.json")
     stderr(f"    the model: {fitted.headline()}")
-    stderr(f"    saved as {model_path.name}; the figures, report, renders, exports and viewer all use it")
+    stderr(f"    saved as {model_path.name} (kind {fitted.kind}); the figures, report, renders, exports and "
+           "viewer all use it")
 
     # 4. validate
     say("validate: round trip, leave-one-orientation-out, reference + baselines, diagnostics")
@@ -181,7 +184,7 @@ def run(args) -> int:
         from kesbrdf.pipeline import outputs
 
         say("figures + report")
-        prior_model = fitted.model if fitted.kind == "fibre-prior" else prior_part.get("prior_model")
+        prior_model = fitted.model if fitted.model.has_sigma else prior_part.get("prior_model")
         inputs = outputs.report_inputs(
             fitted, m, validated, reference,
             metrics=summary,
