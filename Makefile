@@ -36,9 +36,11 @@ demo: venv
 	$(VENV)/bin/kesbrdf demo -o $(OUT)
 
 # The suite includes the doctests of src/kesbrdf (tests/test_doctests.py) and a few
-# thousand fuzz examples per reader (tests/fuzz).
+# thousand fuzz examples per reader (tests/fuzz).  Two workers (pytest-xdist), one per
+# core; a test file stays on one worker so its module fixtures are built once.
+PYTEST_WORKERS ?= 2
 test: venv $(if $(shell command -v npm 2>/dev/null),viewer)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
 
 test-web: venv viewer

@@ -29,7 +29,7 @@ def test_simulate_writes_paper_protocol(tmp_path):
 def test_eval_matches_library_and_inputs(tmp_path, fitted):
     from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     meas, model_path = fitted
     pairs = tmp_path / "pairs.csv"
@@ -108,7 +108,7 @@ def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys)
     assert "scattered fit" in capsys.readouterr().err
     js = tmp_path / "v.json"
     assert main(["validate", str(model), str(src), "--json", str(js)]) == 0
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.models.scattered import evaluate_sample_frame
     from kesbrdf.validate.compare import metrics
 

@@ -12,7 +12,7 @@ import pytest
 from kesbrdf.measure.demo_data import embedded_measurement
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.io.text import MAX_LINE_CHARS
-from kesbrdf.models.kes import load
+from kesbrdf.io.model_file import load_model as load
 from kesbrdf.viewer import server as server_module
 from kesbrdf.viewer.server import MAX_FIT_CHANNELS, ModelStore, ViewerLimits, make_server
 

@@ -210,7 +210,7 @@ def _read_m(inputs):
 
 
 def _load_model(inputs):
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     return load(inputs["fit/model.kes.json"])
 
@@ -221,7 +221,7 @@ def step_fit(inputs: dict, params: dict, out: Path) -> dict:
     model.save(out / "model.kes.json")
     d = getattr(model, "diagnostics", {}) or {}
     return {
-        "kind": getattr(model, "kind", "kes"),
+        "kind": model.kind,
         "n_samples": len(m),
         "channels": list(model.channels),
         "floored": len(d.get("floored", []) or []),
@@ -237,7 +237,7 @@ def step_validate(inputs: dict, params: dict, out: Path) -> dict:
     doc = {"round_trip": validate(model, m, params.get("mapping"))}
     result = {"fit_nrmse": _finite(doc["round_trip"]["metrics"]["all"]["nrmse"]),
               "fit_rmse": _finite(doc["round_trip"]["metrics"]["all"]["rmse"])}
-    if getattr(model, "kind", "kes") == "kes" and model.parameters.get("fit") != "scattered":
+    if model.fitter_name == "kes":  # the KES interpolation's own check (the kes fitter made it)
         try:
             loo = leave_one_orientation_out(m, mapping=params.get("mapping") or "deviation",
                                             fallback=params.get("fallback") or "log")

@@ -149,7 +149,7 @@ def _load_model(model):
         path = Path(model)
         if not path.is_file():
             raise FileNotFoundError(2, "No such file or directory", str(path))
-        from kesbrdf.models.kes import load
+        from kesbrdf.io.model_file import load_model as load
 
         return load(path)
     return model

@@ -86,12 +86,6 @@ void main()
 """
 
 
-def _check_model(model):
-    kind = getattr(model, "kind", "kes")
-    if kind != "kes" or not hasattr(model, "table"):
-        raise KesbrdfError(f"brdf-explorer export: expected a 'kes' model (phi, gamma table), got kind {kind!r}")
-
-
 def resample_table(model, n_phi: int, n_gamma: int):
     """The model's table q resampled on a (n_phi × n_gamma) grid by its own bilinear lookup.
 
@@ -210,8 +204,9 @@ vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)
 
 
 def brdf_explorer_source(model, n_phi: int | None = None, n_gamma: int | None = None) -> tuple[str, dict]:
-    """Text of the ``.brdf`` file and a description of the baked table."""
-    _check_model(model)
+    """Text of the ``.brdf`` file and a description of the baked table (``model.table_view()``:
+    the (φ, γ) table, or the tabulated view of a kind without one)."""
+    model = model.table_view()
     d_phi, d_gamma_n = _default_grid(model)
     n_phi = int(n_phi or d_phi)
     n_gamma = int(n_gamma or d_gamma_n)
@@ -337,6 +332,13 @@ def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) 
     out = Path(out)
     if out.suffix.lower() != ".brdf":
         raise KesbrdfError(f"brdf-explorer export: expected an output ending in .brdf, got {out.name!r}")
+    if not callable(getattr(model, "table_view", None)):
+        raise KesbrdfError(f"brdf-explorer export: expected a 'kes' model or a model of any kind (its (phi, gamma) "
+                           f"table view), got {type(model).__name__}")
+    notes = [] if model.has_table else [
+        f"the GLSL evaluates the (phi, gamma) table tabulated from the {model.kind!r} model "
+        "(kesbrdf.models.table.tabulate), exact on the paper's incidence line"]
+    model = model.table_view()
     text, info = brdf_explorer_source(model, n_phi, n_gamma)
     err = downsampling_error(model, info["n_phi"], info["n_gamma"])
     with atomic_path(out) as tmp:
@@ -350,4 +352,5 @@ def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) 
         "fit_error": None,
         "exact": info["n_phi"] == model.phi_grid.size and info["n_gamma"] == model.gamma_grid.size,
         "open_with": OPEN_WITH,
+        "notes": notes,
     }

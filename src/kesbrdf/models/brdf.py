@@ -30,7 +30,7 @@ direction, so θ = 90° exactly — gives 0; a non-finite component gives NaN; f
 input never gives inf or NaN.  Large inputs are evaluated in chunks.
 
 The direction mappings themselves live in :mod:`kesbrdf.models.mappings` and the table
-lookup in :mod:`kesbrdf.models.kes`; both are re-exported here for backward compatibility.
+lookup in :mod:`kesbrdf.models.table`; both are re-exported here for backward compatibility.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from kesbrdf.models.mappings import (
     to_phi_gamma,
     validate_mapping,
 )
-from kesbrdf.models.kes import lookup
+from kesbrdf.models.table import lookup
 
 __all__ = [
     "MAPPINGS",

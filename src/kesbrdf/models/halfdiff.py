@@ -120,11 +120,10 @@ from kesbrdf.models.kes import (
     FALLBACKS,
     ORIENTATION_TOL,
     RELATIVE_NOISE_FLOOR,
-    check_uniform_grid,
-    check_values,
     fallback_warning,
     select_orientations,
 )
+from kesbrdf.models.table import check_uniform_grid, check_values
 
 __all__ = [
     "KIND",
@@ -216,6 +215,20 @@ class HalfDiffModel(ReflectanceModel):
 
     def mirror_behaviour(self) -> dict:
         return mirror_behaviour(self)
+
+    # -- capabilities (kinds contract) -------------------------------------------
+    def describe(self) -> str:
+        n_phi, n_h, n_d = self.table.shape[:3]
+        return (f"kes-halfdiff table {n_phi} x {n_h} x {n_d} over (phi_h, theta_h, theta_d), "
+                f"{self.orientations} orientations, channels {', '.join(self.channels)}")
+
+    def render_plugin(self, mapping=None, extrapolation=None):
+        """The ``kesbrdf_halfdiff`` plugin: its own (φ_h, θ_h, θ_d) parametrisation, so a
+        KES ``mapping`` other than the default is an error."""
+        if mapping not in (None, "deviation"):
+            raise ModelError(f"mapping {mapping!r} applies to kes models only; a {self.kind} model has its own "
+                             "parametrisation (drop --mapping)")
+        return "kesbrdf_halfdiff", ({} if extrapolation is None else {"extrapolation": extrapolation})
 
     def to_payload(self):
         return {}, {name: getattr(self, name) for name in _ARRAYS}

@@ -666,6 +666,8 @@ class ScatteredFit:
     """
 
     kind = "kes"
+    #: kind="auto" compares the scattered fit with the prior by k-fold cross-validation
+    auto_compare = "kfold"
     fit_options = ("warp_deg", "symmetry", "body", "smooth_gamma", "smooth_phi", "loss_scale",
                    "gamma_nodes_deg", "offset_step_deg", "max_nfev", "mapping")
 

@@ -244,18 +244,21 @@ def _render(v, path: tuple = (), depth: int = 0) -> str:
 def _model_summary(model) -> dict:
     if model is None:
         return {}
+    table = model.table_view()  # the (φ, γ) table, or the tabulated view of a kind without one
     out = {
         "kind": model.kind,
+        "model": model.describe(),
         "channels": ", ".join(model.channels),
         "orientations": model.parameters.get("orientations"),
-        "table shape": " × ".join(str(n) for n in np.shape(model.table)),
+        "(φ, γ) table shape": " × ".join(str(n) for n in np.shape(table.table))
+        + ("" if model.has_table else " (tabulated through evaluate)"),
     }
-    if model.kind == "kes":
-        out["table (n_phi × n_gamma)"] = f"{len(model.phi_grid)} × {len(model.gamma_grid)}"
-        out["γ_max (°)"] = round(math.degrees(float(np.max(model.gamma_grid))), 6)
+    if model.has_table:
+        out["table (n_phi × n_gamma)"] = f"{len(table.phi_grid)} × {len(table.gamma_grid)}"
+        out["γ_max (°)"] = round(math.degrees(float(np.max(table.gamma_grid))), 6)
     return {
         **out,
-        "body c (1/sr)": np.asarray(model.body, float).tolist(),
+        "body c of the (φ, γ) table (1/sr)": np.asarray(table.body, float).tolist(),
         "input": (model.input_info or {}).get("name"),
         "sample": (model.input_info or {}).get("sample"),
     }

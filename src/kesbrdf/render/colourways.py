@@ -138,7 +138,7 @@ def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation")
     import drjit as dr
     import mitsuba as mi
 
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.render.bsdf import model_rgb
 
     _, measured = model_rgb(load(model_path), model_path)

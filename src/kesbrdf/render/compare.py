@@ -126,10 +126,10 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
     return fit_halfdiff(m, fallback="log"), len(m)
 
 
-def model_bsdf_dict(model_path, kind: str, opts: "_scenes.RenderOptions") -> dict:
-    """The plugin entry rendering a saved model of kind ``kes``, ``kes-halfdiff`` or
-    ``fibre-prior`` (:func:`kesbrdf.render.scenes.bsdf_dict`)."""
-    return _scenes.bsdf_dict(model_path, opts, kind)
+def model_bsdf_dict(model_path, model, opts: "_scenes.RenderOptions") -> dict:
+    """The plugin entry rendering ``model`` saved at ``model_path``, any kind
+    (:func:`kesbrdf.render.scenes.bsdf_dict`)."""
+    return _scenes.bsdf_dict(model_path, opts, model)
 
 
 def cloth_mask(scene: "mi.Scene", shape_id: str = "cloth") -> np.ndarray:
@@ -245,10 +245,9 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         mask = cloth_mask(ref_scene)
         img_ref = _scenes.render_scene(ref_scene, opts)
         for mo, model in fitted.items():
-            kind = getattr(model, "kind", "kes")
             model_path = Path(tmp) / f"{mo}.kes.json"
             model.save(model_path)
-            mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, kind, o2))
+            mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, model, o2))
             images[mo] = _scenes.render_scene(mod_scene, o2)
         img_ref2 = None
         if noise_floor:
@@ -260,11 +259,11 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         "reference": reference,
         "protocol": protocol,
         "scene": scene,
-        "model_kind": getattr(fitted[models[0]], "kind", "kes"),
+        "model_kind": fitted[models[0]].kind,
         "samples": n_samples,
         "flip": first["flip"],
         "rel_rmse": first["rel_rmse"],
-        "models": {mo: {"kind": getattr(fitted[mo], "kind", "kes"), "flip": r["flip"], "rel_rmse": r["rel_rmse"]}
+        "models": {mo: {"kind": fitted[mo].kind, "flip": r["flip"], "rel_rmse": r["rel_rmse"]}
                    for mo, r in results.items()},
         "exposure": exposure,
         "cloth_pixels": int(mask.sum()),

@@ -84,11 +84,13 @@ def _rgb(a):
 
 def check_prior_model(path):
     """Load a model file and check that it is a ``fibre-prior`` model with 1 or 3 channels."""
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     model = load(Path(path))
-    if getattr(model, "kind", "kes") != "fibre-prior":
-        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r}")
+    plugin, _ = model.render_plugin()
+    if plugin != PLUGIN:
+        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r} "
+                         f"(drawn by the {plugin!r} plugin)")
     if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
     return model

@@ -8,7 +8,7 @@ import numpy as np
 
 from kesbrdf.models.brdf import evaluate
 from kesbrdf.geometry import grazing_albedo, spherical_to_cartesian  # noqa: F401  (grazing_albedo: public here too)
-from kesbrdf.models.kes import gamma0_behaviour
+from kesbrdf.models.table import gamma0_behaviour
 
 __all__ = ["directional_albedo", "grazing_albedo", "GRAZING_ANGLES_DEG", "reciprocity_error", "gamma0_behaviour", "diagnose"]
 
