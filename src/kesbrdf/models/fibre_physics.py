@@ -48,9 +48,8 @@ otherwise n ln(RSS/n) + k ln n.
 Derivatives (:func:`evaluate_with_jacobian`, docs/prior.md §3): analytic for every
 parameter, the staple twist ψ included (through v*(u), n, t and cos φ), except the axis
 offset δ, which rotates every frame and is a one-sided difference (one geometry
-evaluation per Jacobian).  The residual's Jacobian is (∂f/∂θ)/((f + ε)σ).  Fit CPU time
-before (forward differences of all parameters) → after, BLAS single-threaded, loaded
-machine: 116 samples 1.6–2.6 s → 1.4–2.5 s, 900 samples 3.3–3.8 s → 2.7–3.2 s.
+evaluation per Jacobian).  The residual's Jacobian is (∂f/∂θ)/((f + ε)σ).  Fit times:
+docs/results.md, "prior".
 """
 
 from __future__ import annotations
