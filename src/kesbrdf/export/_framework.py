@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from kesbrdf.errors import ExportError
+from kesbrdf.export.registry import FORMATS
 
 __all__ = ["ExportResult", "export", "format_module", "format_names", "check_output", "check_values",
            "VALUE_MAX"]
@@ -83,15 +84,11 @@ def _jsonable(v):
 
 
 def format_names() -> tuple[str, ...]:
-    from kesbrdf.export import FORMATS
-
     return tuple(FORMATS)
 
 
 def format_module(fmt: str):
     """The module implementing format ``fmt``; a one-line error naming the known formats."""
-    from kesbrdf.export import FORMATS
-
     if not isinstance(fmt, str) or fmt not in FORMATS:
         known = ", ".join(map(repr, FORMATS)) or "(none installed)"
         raise ExportError(f"expected an export format, one of {known}; got {fmt!r}")

@@ -309,8 +309,8 @@ class ReflectanceModel:
         return None
 
     def save(self, path):
-        """Write the model file atomically (:mod:`kesbrdf.io.model_file`)."""
-        from kesbrdf.io.model_file import save_model
+        """Write the model file atomically (:mod:`kesbrdf.io.model_writer`)."""
+        from kesbrdf.io.model_writer import save_model
 
         return save_model(path, self)
 

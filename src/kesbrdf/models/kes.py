@@ -242,7 +242,9 @@ class Model(ReflectanceModel):
         """The (φ, γ) table of any model through its evaluation (:func:`kesbrdf.models.table.tabulate`)."""
         from kesbrdf.models.table import tabulate
 
-        return tabulate(model, n_phi, n_gamma)
+        fields = tabulate(model, n_phi, n_gamma)
+        fields["kesbrdf_version"] = fields["kesbrdf_version"] or cls.kesbrdf_version
+        return cls(**fields)
 
     def describe(self) -> str:
         p, d = self.parameters, self.diagnostics

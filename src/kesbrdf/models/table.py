@@ -172,12 +172,13 @@ def gamma0_behaviour(holder) -> dict:
 def tabulate(model, n_phi: int | None = None, n_gamma: int | None = None):
     """The (φ, γ) table of any model, through its ``evaluate`` (module docstring).
 
-    Returns a model of the ``kes`` kind (the table format) whose ``parameters`` record
-    ``tabulated_from`` (the source kind) and whose evaluation equals ``model``'s at the
-    grid nodes of the paper's incidence line.
+    Returns the keyword fields of a model of the ``kes`` kind (the table format; its
+    class builds the model, :meth:`kesbrdf.models.kes.Model.tabulate`), whose
+    ``parameters`` record ``tabulated_from`` (the source kind) and whose evaluation
+    equals ``model``'s at the grid nodes of the paper's incidence line.  This module
+    imports no kind, so the kinds can borrow from it without an import loop.
     """
     from kesbrdf.geometry import in_plane_directions
-    from kesbrdf.models.kes import Model
     from kesbrdf.models.mappings import line_foreshortening
 
     n_phi = TABLE_N_PHI if n_phi is None else int(n_phi)
@@ -194,7 +195,7 @@ def tabulate(model, n_phi: int | None = None, n_gamma: int | None = None):
     w = line_foreshortening(gamma_grid, math.pi / 2, "bounded")
     table = np.ascontiguousarray(np.maximum(f - body, 0.0) * w[None, :, None])
     q_nodes = np.transpose(table[:: n_phi // 8], (1, 0, 2)).copy()  # (n_gamma, 8, C) at k·45°
-    return Model(
+    return dict(
         channels=tuple(model.channels),
         phi_grid=phi_grid,
         gamma_grid=gamma_grid,
@@ -216,5 +217,5 @@ def tabulate(model, n_phi: int | None = None, n_gamma: int | None = None):
         },
         diagnostics={"incidence_line_deg": 90.0, "warnings": []},
         input_info=dict(getattr(model, "input_info", {}) or {}),
-        kesbrdf_version=getattr(model, "kesbrdf_version", Model.kesbrdf_version),
+        kesbrdf_version=getattr(model, "kesbrdf_version", None),
     )
