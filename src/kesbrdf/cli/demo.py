@@ -115,9 +115,15 @@ def run(args) -> int:
         stderr(f"    {report.comparison_summary()}")
     for w in report.warnings:
         stderr(f"    warning: {w}")
-    # every later step reads the model the fit chose: figures, renderer, viewer and
-    # exports work on every kind (models by capability, docs/models.md)
     kes_model = model
+    if model.kind != "kes":
+        # the paper's figures, the renderer, the viewer and the exports read kes only
+        # (docs/models.md): they get the kes fit; the default is saved and judged beside it
+        model.save(out / f"model.{model.kind}.json")
+        kes_model = kesbrdf.fit(m, kind="kes")[0]
+        kes_model.diagnostics["fit_report"] = report.to_dict()
+        stderr(f"    default model saved as model.{model.kind}.json; figures, renders and exports use the kes fit "
+               "(model.kes.json), which they can read")
     model_path = out / "model.kes.json"
     kes_model.save(model_path)
 
@@ -169,7 +175,7 @@ def run(args) -> int:
             comparisons=comparisons,
             plan=plan_result,
             baselines=summary.get("default_vs_baselines"),
-            prior_model=model if model.has_sigma else prior_part.get("prior_model"),
+            prior_model=model if model.kind == "fibre-prior" else prior_part.get("prior_model"),
             looks=looks,
         )
     else:
