@@ -1,4 +1,4 @@
-"""The package's import graph respects its layers (DESIGN §6, docs/models.md).
+"""The package's import graph respects its layers (docs/architecture.md, "Layers", docs/models.md).
 
 Every module of ``src/kesbrdf`` is parsed with :mod:`ast` (imports inside functions
 count too: a lazy import is still a dependency), and the test fails when
@@ -31,7 +31,7 @@ PACKAGE = SRC / "kesbrdf"
 #: (layer name, module-name prefixes).  A module belongs to the first layer with the
 #: longest matching prefix.
 LAYERS = [
-    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry",
+    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry", "kesbrdf.optics",
               "kesbrdf.models.mappings", "kesbrdf.references.marginal2d"]),
     ("measurement", ["kesbrdf.measure", "kesbrdf.measure.measurement"]),
     ("io", ["kesbrdf.io", "kesbrdf.models.base", "kesbrdf.references", "kesbrdf.measure.gonio",

@@ -9,7 +9,7 @@ import pytest
 
 from kesbrdf.plotting.report import REPORT_FIGURES, build_report, collect, write_report
 
-#: The model reproduces its in-plane input samples to round-off (DESIGN §4); f_r is O(1)/sr.
+#: The model reproduces its in-plane input samples to round-off (docs/method.md, "From the table to a BRDF"); f_r is O(1)/sr.
 ROUND_TRIP_RMSE = 1e-12
 
 METRICS = {

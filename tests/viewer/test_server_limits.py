@@ -5,7 +5,6 @@ from __future__ import annotations
 import http.client
 import json
 import socket
-import threading
 import time
 
 import pytest
@@ -24,23 +23,14 @@ WAIT_S = 20.0
 
 
 @pytest.fixture
-def serve(tmp_path):
+def serve(run_server):
     """Start servers with short head and body deadlines; stop them after the test."""
-    started = []
 
     def start(limits=None, **kwargs):
         limits = limits or ViewerLimits(head_timeout_s=SHORT_TIMEOUT_S, body_timeout_s=SHORT_TIMEOUT_S)
-        srv = make_server(port=0, limits=limits, **kwargs)
-        thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True)
-        thread.start()
-        started.append((srv, thread))
-        return srv
+        return run_server(make_server(port=0, limits=limits, **kwargs))
 
-    yield start
-    for srv, thread in started:
-        srv.shutdown()
-        srv.server_close()
-        thread.join(WAIT_S)
+    return start
 
 
 def post(srv, path, body):

@@ -194,7 +194,7 @@ class ReflectanceModel:
         raise NotImplementedError
 
     def mirror_behaviour(self) -> dict:
-        """How the lobe varies with azimuth at the mirror direction (DESIGN §4); {} if n/a."""
+        """How the lobe varies with azimuth at the mirror direction (docs/method.md, "Diagnostics"); {} if n/a."""
         return {}
 
     # -- capabilities (module docstring) -----------------------------------------

@@ -1,4 +1,4 @@
-r"""From a model to a BRDF f_r(wi, wr) (paper eq. 3–4, DESIGN §4): the public front end.
+r"""From a model to a BRDF f_r(wi, wr) (paper eq. 3–4, docs/method.md, "From the table to a BRDF"): the public front end.
 
 :func:`evaluate` works for every model kind (:mod:`kesbrdf.models.base`): it asks the
 model, which checks the mapping it was given against the ones its kind supports and

@@ -1,6 +1,6 @@
 r"""A few-parameter woven-cloth prior and its fit (docs/prior.md).
 
-The model (``shared/reference/fibre-prior.md``, after Irawan & Marschner 2012)
+The model (docs/prior.md, after Irawan & Marschner 2012)
 ---------------------------------------------------------------------------------
 
 .. math::
@@ -64,6 +64,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError
+from kesbrdf.optics import fresnel_dielectric
 
 __all__ = [
     "FAMILY_KINDS",
@@ -71,7 +72,6 @@ __all__ = [
     "FibrePrior",
     "fit_prior",
     "evaluate_with_jacobian",
-    "fresnel_dielectric",
     "THETA_D_ETA",
     "U_NODES",
     "V_NODES",
@@ -104,18 +104,7 @@ THETA_D_SPREAD = 0.05
 MIN_THETA_D_SAMPLES = 16
 
 
-def fresnel_dielectric(cos_t, eta: float = THETA_D_ETA):
-    """Unpolarised Fresnel reflectance from air into a dielectric of index ``eta``."""
-    c = np.clip(np.abs(cos_t), 0.0, 1.0)
-    g2 = eta * eta - 1.0 + c * c
-    g = np.sqrt(np.maximum(g2, 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        a = (g - c) / (g + c)
-        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return 0.5 * a * a * (1.0 + b * b)
-
-
-_F45 = float(fresnel_dielectric(math.cos(math.pi / 4)))
+_F45 = float(fresnel_dielectric(math.cos(math.pi / 4), THETA_D_ETA))
 
 
 @dataclass(frozen=True)
@@ -370,7 +359,7 @@ def _base(wi, wr):
     s = wi + wr
     norm_sum = np.linalg.norm(s, axis=-1)
     h = s / np.maximum(norm_sum, 1e-300)[:, None]
-    Phi = fresnel_dielectric(np.sum(wi * h, axis=-1)) / _F45
+    Phi = fresnel_dielectric(np.sum(wi * h, axis=-1), THETA_D_ETA) / _F45
     return norm_sum, h, Phi, np.sum(wi * wr, axis=-1)
 
 

@@ -52,7 +52,8 @@ from kesbrdf.models.base import ReflectanceModel, register
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import line_weight
 from kesbrdf.models.table import lookup
-from kesbrdf.models.fibre_physics import FibrePrior, fit_prior, fresnel_dielectric
+from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
+from kesbrdf.optics import fresnel_dielectric
 
 __all__ = ["FibrePriorModel", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
@@ -567,7 +568,7 @@ def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
         # default Fresnel law and no θ_d dependence at all, on the specular fraction
         h = wi + wr
         h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-        log_phi = np.log(np.maximum(fresnel_dielectric(np.sum(wi * h, axis=-1)) / fresnel_dielectric(np.cos(np.pi / 4)), 1e-300))
+        log_phi = np.log(np.maximum(fresnel_dielectric(np.sum(wi * h, axis=-1), THETA_D_ETA) / fresnel_dielectric(np.cos(np.pi / 4), THETA_D_ETA), 1e-300))
         fp = prior(wi, wr)
         kd = np.exp([prior.parameters()[f"log_kd_{c}"] for c in range(prior.spec.n_channels)])
         spec_frac = np.clip((fp - kd) / np.maximum(fp, 1e-300), 0.0, 1.0)

@@ -1,4 +1,4 @@
-r"""The anisotropic reflection model: the table ρ(φ, γ) (paper STEP 3, DESIGN §4).
+r"""The anisotropic reflection model: the table ρ(φ, γ) (paper STEP 3, docs/method.md, "From the table to a BRDF").
 
 :func:`fit` turns in-plane measurements at ψ = 0, π/4, π/2 (and 3π/4) into a
 table of the lobe quantity
@@ -8,7 +8,7 @@ table of the lobe quantity
 (w the foreshortening weight, :func:`kesbrdf.models.mappings.foreshortening`: paper eq. 3's
 √(cos θ_i cos θ_r), bounded toward grazing angles; ``parameters["normalisation"]``)
 over the whole circle of deviation azimuths φ ∈ [0, 2π) and deviations γ ≥ 0, plus a
-Lambertian body term c (DESIGN §4).  The table *is* the model: every consumer (numpy
+Lambertian body term c (docs/method.md, "The body term").  The table *is* the model: every consumer (numpy
 BRDF, Mitsuba plugin, browser viewer) evaluates it by the same bilinear lookup
 (``docs/formats.md``).
 
@@ -16,7 +16,7 @@ How the table is filled
 -----------------------
 1. Signed γ = θ_r − θ_i of each in-plane sample at orientation ψ becomes a
    half-sample at deviation azimuth ψ (γ > 0) or ψ + π (γ < 0) with |γ|; at γ = 0
-   both halves get the same sample (the plane of incidence, DESIGN §4).
+   both halves get the same sample (the plane of incidence, docs/method.md, "From the table to a BRDF").
 2. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
    samples (the darkest reading is an upper bound of the diffuse floor; noise makes
    it a slight underestimate, which only moves energy to the lobe); ``"none"`` is c = 0
@@ -28,7 +28,7 @@ How the table is filled
    (linear in q; the grid contains every measured |γ| when they are uniformly
    spaced, so the measured values are kept exactly).
 5. For every γ of the grid, K = 1/q is interpolated over φ by :mod:`kesbrdf.models.interpolation`.
-   Where K(φ) ≤ 0 somewhere (the hazard of DESIGN §3, common on satins), the default
+   Where K(φ) ≤ 0 somewhere (the hazard of docs/method.md, "Interpolation over orientation", common on satins), the default
    ``fallback="log"`` interpolates log q instead at that γ, records it in
    ``diagnostics["fallback_gamma_deg"]`` and adds a one-line warning naming the γ
    affected to ``diagnostics["warnings"]``; ``fallback="error"`` (``kesbrdf fit
@@ -350,7 +350,7 @@ class Model(ReflectanceModel):
 
 # ---------------------------------------------------------------------------------
 def fallback_warning(what: str, values_deg, n_total: int | None = None) -> str:
-    """The one-line warning of a log fallback (DESIGN §3), naming the angles affected."""
+    """The one-line warning of a log fallback (docs/method.md, "Interpolation over orientation"), naming the angles affected."""
     v = sorted({round(float(x), 3) for x in values_deg})
     if len(v) <= 6:
         named = ", ".join(f"{x:g}" for x in v)
@@ -452,7 +452,7 @@ def fit(
         3 reproduces the paper's eq. 1–2; 4 (default when 135° was measured) uses
         all four orientations.
     fallback : {"log", "error"}
-        What to do where K(φ) ≤ 0 between orientations (DESIGN §3): interpolate log ρ
+        What to do where K(φ) ≤ 0 between orientations (docs/method.md, "Interpolation over orientation"): interpolate log ρ
         there with a recorded warning (default), or raise :class:`KESError`.
     body : "auto", "none" or float
         Lambertian body term c in 1/sr (module docstring).

@@ -17,11 +17,11 @@ The plotted quantity ("ρ" in the paper) is the KES quantity of the model,
 in 1/sr.  Model curves in Fig. 3 and 4 are the model evaluated (``deviation`` mapping
 by default) at the in-plane geometry of the paper's protocol, θ_i = 45° − γ/2,
 θ_r = 45° + γ/2 at orientation ψ, converted to q: they include the body term and pass
-through every measured in-plane sample of that protocol (DESIGN §4 round trip).  Fig. 5
+through every measured in-plane sample of that protocol (docs/method.md, "From the table to a BRDF": round trip).  Fig. 5
 plots the model's table itself, ``lookup(model.table_view(), φ, γ)``: the lobe q without the body
 (every kind has one: a kind without a (φ, γ) table is tabulated through ``evaluate``).
 
-Orientation and azimuth (DESIGN §2, §4): in Fig. 3 and Fig. 4 the angle is the
+Orientation and azimuth (docs/method.md, "Conventions"): in Fig. 3 and Fig. 4 the angle is the
 orientation ψ of the plane of incidence (viewer azimuth).  For γ ≥ 0 it is the
 deviation azimuth φ; for γ < 0 the deviation points the other way, φ = ψ + π, which is
 the paper's "negative γ means azimuth φ + π".
@@ -563,7 +563,7 @@ def model_in_plane(model, psi, gamma, mapping: str | None = None) -> np.ndarray:
     """The model's q at the paper's in-plane geometry for orientation ψ and signed γ.
 
     θ_i = π/4 − γ/2, θ_r = π/4 + γ/2, light at azimuth ψ + π, viewer at ψ
-    (DESIGN §1–2); returns ``evaluate(model, wi, wr, mapping) · √(cos θ_i cos θ_r)``.
+    (docs/method.md, "Conventions"); returns ``evaluate(model, wi, wr, mapping) · √(cos θ_i cos θ_r)``.
 
     Parameters
     ----------
@@ -759,7 +759,7 @@ def figure_3b(model=None, measurement=None, reference=None, *, channel=None, map
 
 
 def _measured_at_gamma(measured: dict, gamma_deg: float):
-    """Measured (angle, q) at signed γ: ψ with γ, and ψ + 180° with −γ (DESIGN §4)."""
+    """Measured (angle, q) at signed γ: ψ with γ, and ψ + 180° with −γ (docs/method.md, "From the table to a BRDF")."""
     phis, values = [], []
     for sign, offset in ((1.0, 0.0), (-1.0, 180.0)):
         # at γ = 0 both halves are the same sample, drawn at ψ and at ψ + 180°

@@ -9,17 +9,17 @@ Dr.Jit (single precision), so it agrees with :func:`kesbrdf.models.brdf.evaluate
 
 with w the model's foreshortening weight (:func:`foreshortening`, the Dr.Jit twin of
 :func:`kesbrdf.models.mappings.foreshortening`: √(cos θ_i cos θ_r), bounded toward grazing
-angles for models with ``normalisation="bounded"``), (φ, γ) from the ``deviation`` or ``halfvector`` mapping (DESIGN §4), q read by
+angles for models with ``normalisation="bounded"``), (φ, γ) from the ``deviation`` or ``halfvector`` mapping (docs/method.md, "From the table to a BRDF"), q read by
 bilinear lookup (φ periodic, γ clamped to the measured range; a ``mi.Texture2f``
 whose first φ row is repeated after the last, so clamping equals periodic
 wrapping), c the body term and t the lobe tint.
 
-Frames (DESIGN §7).  Mitsuba's local shading frame is (s, t, n) with s the
+Frames (docs/architecture.md, "Tools it runs on").  Mitsuba's local shading frame is (s, t, n) with s the
 normalised UV-u tangent ∂p/∂u, so **u runs along the warp (fabric x) and v along the
 weft**.  Mitsuba's ``si.wi`` points to the camera, i.e. it is the model's ω_r, and
 ``wo`` points to the light, the model's ω_i.
 
-Colour (DESIGN §5).  ``base_color`` is the Lambertian albedo of the dyed body:
+Colour (docs/method.md, "Colour").  ``base_color`` is the Lambertian albedo of the dyed body:
 c = base_color/π replaces the measured body term; unset, the measured body is used.
 ``lobe_tint`` multiplies the measured lobe q (default 1: the measured sheen, which
 for a dyed satin stays nearly neutral).  Gloss and anisotropy live in q alone, so

@@ -1,4 +1,4 @@
-"""A contact sheet of one garment in several colourways (DESIGN §5).
+"""A contact sheet of one garment in several colourways (docs/method.md, "Colour").
 
 Every tile uses the same model, scene, light and camera; only ``base_color`` (the
 Lambertian albedo of the dyed body) changes, so the measured lobe, which carries the

@@ -13,7 +13,7 @@ Chain (one call, :func:`compare_render`):
      fitted with :func:`kesbrdf.models.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
      rendered by the ``kesbrdf_halfdiff`` plugin (:mod:`kesbrdf.render.halfdiff_bsdf`).
 
-   Both fits use ``fallback="log"`` (DESIGN §3) and ``body="auto"``.  With
+   Both fits use ``fallback="log"`` (docs/method.md, "Interpolation over orientation") and ``body="auto"``.  With
    ``models=("kes", "fibre-prior")`` the same measurement is also fitted with the fibre
    prior times its residual (:meth:`kesbrdf.models.fibre_prior.FibrePriorModel.fit_measurement`,
    kind ``fibre-prior``: a KES residual table on the paper protocol, a half/difference

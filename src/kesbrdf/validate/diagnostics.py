@@ -1,4 +1,4 @@
-"""Physical diagnostics of a model (DESIGN §4): reciprocity, directional albedo
+"""Physical diagnostics of a model (docs/method.md, "Diagnostics"): reciprocity, directional albedo
 (white-furnace check), and the behaviour at the mirror direction γ → 0.
 """
 

@@ -1,7 +1,7 @@
 """Local HTTP server of the web viewer: static bundle plus a small JSON API.
 
 An ASGI application served by uvicorn (HTTP/1.1 through h11; docs/decisions.md, "Viewer
-server: uvicorn, deadlines and fit budgets").  The server binds to 127.0.0.1 by default
+server").  The server binds to 127.0.0.1 by default
 and serves
 
 * the built viewer bundle from ``kesbrdf/viewer/static/`` (``GET /``, ``GET /assets/...``);
