@@ -139,7 +139,9 @@ def run(fabrics=None, folds: int = N_FOLDS) -> dict:
     return {
         "folds": folds,
         "seed": SEED,
-        "source": str(SHARED if SHARED is not None and SHARED.exists() else EXTRACT),
+        # named, not as a path: the page of results is read on other machines
+        "source": ("the full CUReT files ($KESBRDF_CURET_DIR)" if SHARED is not None and SHARED.exists()
+                   else "tests/data/curet_fabrics.csv"),
         "fabrics": table,
         "wins": summary,
         "mean_log_rmse": means,

@@ -40,10 +40,13 @@ LAYERS = [
     ("model", ["kesbrdf.models"]),
     ("brdf", ["kesbrdf.models.brdf"]),
     ("validate", ["kesbrdf.validate"]),
-    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.measure.planning"]),
+    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.measure.planning", "kesbrdf.pipeline"]),
     # The applications, in order: cli over batch over the four views over cloth.
     ("cloth", ["kesbrdf.cloth"]),
     ("views", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.viewer", "kesbrdf.export"]),
+    # the pipeline's steps that write through the views (report, export, preview); its
+    # steps up to validation are at the fitting layer, so the views may call the fit
+    ("pipeline outputs", ["kesbrdf.pipeline.outputs"]),
     ("batch", ["kesbrdf.batch"]),
     ("cli", ["kesbrdf.cli"]),
 ]

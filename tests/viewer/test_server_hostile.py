@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from kesbrdf.viewer.server import ViewerLimits, make_server
+from server_helpers import post_json
 
 #: Longest any single wait of these tests lasts (s): far beyond every deadline under test.
 WAIT_S = 20.0
@@ -189,15 +190,7 @@ def _scattered_csv(rows: int, seed: int = 7) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-def _post(srv, path: str, body: bytes, timeout: float = WAIT_S):
-    host, port = srv.server_address[:2]
-    conn = http.client.HTTPConnection(host, port, timeout=timeout)
-    try:
-        conn.request("POST", path, body=body, headers={"Content-Length": str(len(body))})
-        resp = conn.getresponse()
-        return resp.status, json.loads(resp.read())
-    finally:
-        conn.close()
+_post = post_json
 
 
 #: CPU and wall-clock budget of the fit under test (s); the upload's fit takes about

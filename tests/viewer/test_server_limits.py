@@ -15,6 +15,7 @@ from kesbrdf.io.text import MAX_LINE_CHARS
 from kesbrdf.io.model_file import load_model as load
 from kesbrdf.viewer import server as server_module
 from kesbrdf.viewer.server import MAX_FIT_CHANNELS, ModelStore, ViewerLimits, make_server
+from server_helpers import post_json
 
 #: Head and body deadlines of the servers under test (s): short so that the tests are quick.
 SHORT_TIMEOUT_S = 0.5
@@ -33,15 +34,7 @@ def serve(run_server):
     return start
 
 
-def post(srv, path, body):
-    host, port = srv.server_address[:2]
-    conn = http.client.HTTPConnection(host, port, timeout=WAIT_S)
-    try:
-        conn.request("POST", path, body=body, headers={"Content-Length": str(len(body))})
-        resp = conn.getresponse()
-        return resp.status, json.loads(resp.read())
-    finally:
-        conn.close()
+post = post_json
 
 
 def get(srv, path):

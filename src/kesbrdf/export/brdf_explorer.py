@@ -37,6 +37,7 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.export._framework import ExportResult
 from kesbrdf.models.mappings import BOUNDED_LAMBDA, EXTRAPOLATIONS, FADE_DEG, NORMALISATIONS
 
 __all__ = ["export", "brdf_explorer_source", "resample_table", "lobe_parameters", "glsl_function", "KES_GLSL", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
@@ -320,14 +321,14 @@ EXTENSIONS = (".brdf",)
 HELP = 'Disney BRDF Explorer analytic .brdf whose GLSL evaluates the KES table itself (not a fit)'
 
 
-def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) -> dict:
+def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) -> ExportResult:
     """Write ``model`` as a BRDF Explorer analytic ``.brdf`` file.
 
     Returns
     -------
-    dict
-        ``paths``, ``size``, ``table`` (baked grid), ``downsampling_error`` (relative f_r
-        error of the baked table against the model), ``open_with``.
+    ExportResult
+        ``agreement``: ``table`` (baked grid), ``downsampling_error`` (relative f_r error
+        of the baked table against the model), ``exact``.
     """
     out = Path(out)
     if out.suffix.lower() != ".brdf":
@@ -343,14 +344,11 @@ def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) 
     err = downsampling_error(model, info["n_phi"], info["n_gamma"])
     with atomic_path(out) as tmp:
         tmp.write_text(text)
-    return {
-        "format": "brdf-explorer",
-        "paths": [str(out)],
-        "size": out.stat().st_size,
+    agreement = {
         "table": info,
         "downsampling_error": err,
         "fit_error": None,
         "exact": info["n_phi"] == model.phi_grid.size and info["n_gamma"] == model.gamma_grid.size,
-        "open_with": OPEN_WITH,
-        "notes": notes,
     }
+    return ExportResult("brdf-explorer", [out], size=out.stat().st_size, agreement=agreement, notes=notes,
+                        open_with=OPEN_WITH)

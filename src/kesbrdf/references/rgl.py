@@ -13,8 +13,7 @@ Why Mitsuba rather than a numpy reader
 Reconstructing a value means inverting the VNDF warp (a 2-D marginal/conditional
 distribution interpolated over θ_i) to find where the half vector falls in the
 sample grid, then interpolating the stored ratios there.  Mitsuba's plugin is the
-reference implementation of exactly that, it is vectorised (LLVM backend: 1.4 million
-evaluations a second on this 2-core machine) and it is the code that renders these materials.
+reference implementation of exactly that, it is vectorised (LLVM backend) and it is the code that renders these materials.
 A second implementation in numpy would be a re-derivation without a reference to
 check it against.  So this module calls the plugin, variant ``llvm_ad_rgb`` (the one
 :mod:`kesbrdf.render` uses).  It needs the extra ``kesbrdf[render]``.  Without Mitsuba,

@@ -65,6 +65,7 @@ __all__ = [
     "DEFAULT_REFERENCES",
     "default_options",
     "fit_reference_model",
+    "fit_spec",
     "model_bsdf_dict",
     "cloth_mask",
     "flip_mean",
@@ -101,7 +102,8 @@ def default_options(**kw) -> "_scenes.RenderOptions":
 
 
 def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measurement=None):
-    """Measure ``ref`` virtually and fit ``model`` (one of :data:`MODELS`) for that protocol.
+    """Measure ``ref`` virtually and fit ``model`` (one of :data:`MODELS`) for that protocol
+    with the pipeline's fit step (:func:`kesbrdf.pipeline.fit`, spec :func:`fit_spec`).
 
     ``measurement`` reuses a measurement of ``ref`` with that protocol.  Returns
     (fitted model, n_samples).
@@ -112,18 +114,21 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
     if model not in MODELS:
         raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
+    from kesbrdf.pipeline import fit
+
     m = measurement if measurement is not None else measure(ref, protocol=protocol)
+    return fit(m, fit_spec(protocol, model)).model, len(m)
+
+
+def fit_spec(protocol: str, model: str = "kes"):
+    """The pipeline's fit spec (:class:`kesbrdf.pipeline.FitSpec`) of a comparison model:
+    the protocol's KES kind with the log fallback, or the fibre prior with
+    (``fibre-prior``) or without (``prior-only``) its residual."""
+    from kesbrdf.pipeline import FitSpec
+
     if model in ("fibre-prior", "prior-only"):
-        from kesbrdf.models.fibre_prior import FibrePriorModel
-
-        return FibrePriorModel.fit_measurement(m, residual=model == "fibre-prior"), len(m)
-    if protocol == "paper":
-        from kesbrdf.models.kes import fit
-
-        return fit(m, fallback="log"), len(m)
-    from kesbrdf.models.halfdiff import fit_halfdiff
-
-    return fit_halfdiff(m, fallback="log"), len(m)
+        return FitSpec("fibre-prior", {"residual": model == "fibre-prior"})
+    return FitSpec("kes" if protocol == "paper" else "kes-halfdiff", {"fallback": "log"})
 
 
 def model_bsdf_dict(model_path, model, opts: "_scenes.RenderOptions") -> dict:
