@@ -280,3 +280,81 @@ def test_library_capabilities_of_the_toy_kind(toy_kind, tmp_path):
     # the held-out orientation is predicted from the others (the toy's family: exact again)
     held_m = m.subset(held)
     np.testing.assert_allclose(evaluate(refit, held_m.wi, held_m.wr), held_m.values, rtol=1e-6)
+
+
+# ------------------------------------------------------------------------------------
+# the capabilities on the registered kinds
+# ------------------------------------------------------------------------------------
+@pytest.mark.parametrize("kind", base.known_kinds())
+def test_table_view_reproduces_every_kind_on_the_paper_line(kind, kind_models):
+    """The (φ, γ) view (figure 5, shaders, viewer) equals the model at its nodes on the
+    paper's line θ_i + θ_r = 90° (NODE_RTOL), and is reciprocal (deviation mapping)."""
+    from kesbrdf.geometry import in_plane_directions
+    from kesbrdf.io.model_file import load_model
+    from kesbrdf.models.brdf import evaluate
+
+    model = load_model(kind_models[kind][0])
+    table = model.table_view()
+    assert table.kind == base.TABLE_KIND and table.has_table and table.table_view() is table
+    assert model.has_table == (table is model)
+    g_max = min(float(table.gamma_grid[-1]), math.radians(88.0))
+    gammas = table.gamma_grid[table.gamma_grid <= g_max][::7]
+    psi, gamma = np.meshgrid(table.phi_grid[::30], gammas, indexing="ij")
+    wi, wr = in_plane_directions(psi, np.pi / 4 - gamma / 2, np.pi / 4 + gamma / 2)
+    f_model = evaluate(model, wi, wr)
+    np.testing.assert_allclose(evaluate(table, wi, wr), f_model, rtol=NODE_RTOL, atol=1e-12 * f_model.max())
+    np.testing.assert_allclose(evaluate(table, wr, wi), evaluate(table, wi, wr), rtol=NODE_RTOL)
+
+
+@pytest.mark.parametrize("kind", base.known_kinds())
+def test_refit_on_every_row_gives_the_same_model(kind, kind_models):
+    """``refit`` is the same fit: on every row of the measurement it reproduces the model
+    (same fitter, same options; deterministic fits: 1e-9 relative), and a model read from
+    a file without its measurement says so in one line."""
+    from kesbrdf.errors import ModelError
+    from kesbrdf.io.measurement_csv import read_measurement
+    from kesbrdf.io.model_file import load_model
+    from kesbrdf.models.brdf import evaluate
+
+    model_path, meas_path = kind_models[kind]
+    model, m = load_model(model_path), read_measurement(meas_path)
+    with pytest.raises(ModelError, match="expected the measurement it was fitted to") as err:
+        model.refit(np.ones(len(m), bool))
+    assert "\n" not in str(err.value)
+    again = model.refit(np.ones(len(m), bool), m)
+    assert again.kind == model.kind
+    np.testing.assert_allclose(evaluate(again, m.wi, m.wr), evaluate(model, m.wi, m.wr), rtol=1e-9, atol=1e-12)
+
+
+def test_sigma_is_asked_not_named(kind_models):
+    """Only kinds that carry a σ give one; σ ≥ 0 and f is the model's own prediction."""
+    from kesbrdf.io.measurement_csv import read_measurement
+    from kesbrdf.io.model_file import load_model
+
+    for kind, (model_path, meas_path) in kind_models.items():
+        model, m = load_model(model_path), read_measurement(meas_path)
+        result = model.predict_sigma(m.wi, m.wr)
+        assert (result is not None) == model.has_sigma, kind
+        if result is not None:
+            f, sigma, _ = result
+            assert np.all(sigma >= 0)
+            np.testing.assert_allclose(f, model.evaluate(m.wi, m.wr), rtol=1e-9, atol=1e-12)
+
+
+def test_report_on_a_scattered_fit_with_its_measurement(tmp_path, capsys):
+    """Issue 19: ``kesbrdf report`` on a scattered fit with ``--measurement`` of scattered
+    data ended in a TypeError; leave-one-orientation-out now records a one-line reason
+    (no orientation ψ to hold out) and the rest of the report is written."""
+    from kesbrdf.io.measurement_csv import read_measurement, write_measurement
+    from kesbrdf.measure.measurement import Measurement
+
+    dense = read_measurement(_measurements(tmp_path)[1])
+    scattered = Measurement(dense.theta_i, dense.phi_i, dense.theta_r, dense.phi_r, dense.values)
+    meas, model, report = tmp_path / "scattered.csv", tmp_path / "s.kes.json", tmp_path / "r.html"
+    write_measurement(meas, scattered)
+    assert main(["fit", str(meas), "--kind", "scattered", "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["report", str(model), "--measurement", str(meas), "-o", str(report)]) == 0
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    assert "leave-one-orientation-out needs in-plane samples" in report.read_text()
