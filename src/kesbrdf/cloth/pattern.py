@@ -19,6 +19,13 @@ The garment is cut as a tailor would cut it (docs/drape.md, "Pattern panels"):
   ``kesbrdf`` BSDF's x axis (warp, ∂p/∂u) runs along each gore's own grain line, so the
   warp of neighbouring gores meets at an angle at every seam, as in a real gored skirt.
   ∂p/∂u × ∂p/∂v points out of the garment.
+* **Bias cut.** The gores in ``bias_gores`` (default: the centre front) are cut on the
+  bias: their grain line runs at 45° to the gore's centre line.  Their UVs are the
+  straight-grain ones turned by +45° in pattern space, u' = (u + v)/√2,
+  v' = (v − u)/√2 (a rotation, so ∂p/∂u' × ∂p/∂v' still points out and the BSDF's warp
+  follows the bias grain), and their springs are assembled with the threads along the
+  cell diagonals (:func:`kesbrdf.cloth.grid.grid_piece` with ``bias=True``): the panel
+  is compliant down its length and drapes in softer, rounder folds than its neighbours.
 * **Placement.** Row y of every gore is laid on one horizontal ellipse around the body
   (the body's cross-section at that height, grown until its perimeter is C(y) plus one
   seam gap per seam), gore k centred on the arc at k/gores of the way round from the
@@ -43,6 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from kesbrdf.cloth import mannequin as _mannequin
+from kesbrdf.cloth.grid import ClothPiece, grid_piece
 
 __all__ = ["SkirtPattern", "SEAM_GAP", "circumference", "gore_outline", "gored_skirt"]
 
@@ -63,6 +71,7 @@ class SkirtPattern:
     hem_circumference : circumference of the hem (flare).
     hang_flare : fraction of the flare (girth beyond the hip's) kept in the mean girth of
         the placed skirt; the rest is laid in flutes, one per gore.
+    bias_gores : gores cut on the bias (grain at 45°); gore 0 is the centre front.
     """
 
     gores: int = 6
@@ -71,6 +80,7 @@ class SkirtPattern:
     hip_ease: float = 0.06
     hem_circumference: float = 2.2
     hang_flare: float = 0.45
+    bias_gores: tuple[int, ...] = (0,)
 
 
 def _body_ellipse(z, grow=0.0):
@@ -165,22 +175,27 @@ def _arc_points(a, b, c, s_query, amp=None, waves: int = 6, samples: int = 4096)
 
 def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: float,
                 pattern: SkirtPattern = SkirtPattern()):
-    """The sewn skirt as one :class:`~kesbrdf.cloth.scenes.ClothPiece` (z up, waist at 1 m).
+    """The sewn skirt as one :class:`~kesbrdf.cloth.grid.ClothPiece` (z up, waist at 1 m).
 
     ``rows`` cells down each gore, ``cols`` across.  The waist row is pinned.  Extra
     fields on the piece: ``spring_rest`` (pattern rest lengths of the springs, seams
     included), ``flat_rest`` (bending rest angle 0), ``radius_scale`` (per-vertex
     contact radius factor: SEAM_GAP/2 over the default for seam vertices, as a length
-    [m] in ``seam_radius``), ``seams`` (P, 2) stitched vertex pairs, ``panels``.
+    [m] in ``seam_radius``), ``seams`` (P, 2) stitched vertex pairs, ``panels``,
+    ``bias_gores``.
     """
-    from kesbrdf.cloth import scenes as _scenes
-
     n = pattern.gores
+    bad = [g for g in pattern.bias_gores if not 0 <= int(g) < n]
+    if bad:
+        raise ValueError(f"pattern: expected bias gores in [0, {n - 1}], got {bad}")
     x, y = gore_outline(pattern, rows, cols)
     n_i, n_j = x.shape
     flat = np.stack([x, y, np.zeros_like(x)], -1)
     uv = np.stack([y, x + float(np.max(np.abs(x)))], -1)  # u down the grain line, v across
-    gore = _scenes._grid(flat, uv, False, density, stretch, shear)
+    straight = grid_piece(flat, uv, False, density, stretch, shear)
+    r = np.sqrt(0.5)
+    uv_bias = np.stack([r * (uv[..., 0] + uv[..., 1]), r * (uv[..., 1] - uv[..., 0])], -1)  # grain turned +45°
+    bias = grid_piece(flat, uv_bias, False, density, stretch, shear, bias=True)
 
     # placement: rows on ellipses around the body, nearly isometric down the meridian;
     # below the hip line the flare is laid in flutes (one per gore, crest at its centre)
@@ -202,7 +217,10 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
 
     n_per = n_i * n_j
     positions, faces, springs, ke, rest = [], [], [], [], []
+    uvs = []
     for k in range(n):
+        gore = bias if k in pattern.bias_gores else straight
+        uvs.append(gore.uv_rest)
         s_query = k * perim[:, None] / n + x  # pattern x -> arc length on the row's ellipse
         xy = _arc_points(A, B, c0, s_query, amp, n)
         positions.append(np.concatenate([xy, np.broadcast_to(z[:, None, None], (n_i, n_j, 1))], -1).reshape(-1, 3))
@@ -221,10 +239,10 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
     rest.append(np.full(len(seams), SEAM_GAP))
 
     N = n * n_per
-    piece = _scenes.ClothPiece(
+    piece = ClothPiece(
         shape=(n_i, n_j), positions=np.concatenate(positions).astype(np.float32),
-        faces=np.concatenate(faces).astype(np.int32), uv_rest=np.tile(gore.uv_rest, (n, 1)),
-        masses=np.tile(gore.masses, n), springs=np.concatenate(springs).astype(np.int32),
+        faces=np.concatenate(faces).astype(np.int32), uv_rest=np.concatenate(uvs),
+        masses=np.tile(straight.masses, n), springs=np.concatenate(springs).astype(np.int32),
         spring_ke=np.concatenate(ke), min_spring_length=float(np.min(np.concatenate(rest[:-1]))),
         pinned=np.zeros(N, bool), closed=False,
     )
@@ -234,6 +252,7 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
     piece.seams = seams.astype(np.int32)
     piece.seam_radius = SEAM_GAP / 2
     piece.panels = n
+    piece.bias_gores = tuple(int(g) for g in pattern.bias_gores)
     # render mesh: the panels plus a two-triangle strip per row across every seam
     ri, li = seams[:, 0].reshape(n, n_i), seams[:, 1].reshape(n, n_i)
     a_, b_, c_, d_ = ri[:, :-1], ri[:, 1:], li[:, 1:], li[:, :-1]  # a: right edge row r, b: row r+1

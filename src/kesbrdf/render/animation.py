@@ -110,10 +110,10 @@ class _FrameUpdater:
 
     def __call__(self, index: int) -> None:
         mi, d = self.mi, self.drape
-        m = self.read_ply(d.frames[index])
-        self.params["cloth.vertex_positions"] = mi.Float(_to_render_world(m.vertices, d.up_axis).ravel())
-        if m.normals is not None and "cloth.vertex_normals" in self.params:
-            self.params["cloth.vertex_normals"] = mi.Float(_to_render_world(m.normals, d.up_axis).ravel())
+        vertices, normals, _, _ = d.cloth_mesh(index)  # a sewn garment: welded and subdivided
+        self.params["cloth.vertex_positions"] = mi.Float(_to_render_world(vertices, d.up_axis).ravel())
+        if normals is not None and "cloth.vertex_normals" in self.params:
+            self.params["cloth.vertex_normals"] = mi.Float(_to_render_world(normals, d.up_axis).ravel())
         turn = d.body_rotation_deg[index] if d.body_rotation_deg and index < len(d.body_rotation_deg) else 0.0
         for k, c in self.colliders.items():
             self.params[f"collider_{k}.vertex_positions"] = mi.Float(_to_render_world(c.vertices, d.up_axis, turn).ravel())
