@@ -28,8 +28,8 @@ __all__ = ["ClothPiece", "grid_piece", "BIAS_AXIS_FRACTION"]
 #: rotation only: its bias modulus is a fraction of the thread modulus.  0.5 keeps the
 #: per-particle stiffness sum (hence the XPBD substep) that of a straight-grain piece
 #: (4 axis springs of 0.5 E·t and 4 diagonals of 0.5 E·t against 4 of E·t and 4 of
-#: 0.05 E·t) and keeps the sewn panel's extra sag within the seam tolerance
-#: (tests/cloth/test_garment.py).
+#: 0.05 E·t); the sewn panel's seams are taped (kesbrdf.cloth.pattern.BIAS_SEAM_FACTOR)
+#: so that they hold within the seam tolerance (tests/cloth/test_garment.py).
 BIAS_AXIS_FRACTION = 0.5
 
 
