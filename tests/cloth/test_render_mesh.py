@@ -45,9 +45,14 @@ def test_seams_are_welded_and_panels_keep_their_grain(garment):
     s = garment.seams
     # the stitched pair sits at one point, with one normal (no crease, no slit)
     assert np.array_equal(p[s[:, 0]], p[s[:, 1]]) and np.array_equal(n[s[:, 0]], n[s[:, 1]])
-    # ... but each side keeps its own panel's grain-line UV
-    assert np.array_equal(sm.uv[s[:, 0]], garment.output_uv[s[:, 0]])
-    assert np.array_equal(sm.uv[s[:, 1]], garment.output_uv[s[:, 1]])
+    # ... but each side keeps its own panel's grain-line UV: Loop's boundary rule on the
+    # panel moves a seam vertex's UV by at most 1/8 of its two boundary edges (a panel
+    # corner at the hem: 5.5 mm measured), never across to the other panel's (the two
+    # sides of a straight-grain seam are a panel width, > 5 cm, apart in v)
+    for side in (0, 1):
+        assert np.abs(sm.uv[s[:, side]] - garment.output_uv[s[:, side]]).max() < 0.006
+    straight = (s[:, 0] // (len(garment.positions) // 6) != 0) & (s[:, 1] // (len(garment.positions) // 6) != 0)
+    assert (np.abs(sm.uv[s[straight, 0], 1] - sm.uv[s[straight, 1], 1]) > 0.05).all()
     # every triangle still faces out (no flipped faces): its normal agrees with the vertex normals
     fn = _face_normals(p.astype(float), sm.faces)
     vn = n[sm.faces].mean(axis=1)
@@ -77,3 +82,37 @@ def test_subdivision_takes_the_facets_off(garment):
     sm = SmoothMesh(garment.output_faces, garment.output_uv, garment.seams, levels=1)
     p, _ = sm.apply(garment.positions)
     assert np.abs(p[: len(garment.positions)] - garment.positions).max() < 0.03
+
+
+def _dpdu(p, uv, f):
+    d_uv = np.stack([uv[f[:, 1]] - uv[f[:, 0]], uv[f[:, 2]] - uv[f[:, 0]]], 1).astype(float)
+    d_p = np.stack([p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]], 1).astype(float)
+    t = np.einsum("fij,fjk->fik", np.linalg.inv(d_uv), d_p)[:, 0]
+    return t / np.linalg.norm(t, axis=1, keepdims=True)
+
+
+def _neighbour_turn_deg(t, f):
+    half = np.stack([f, np.roll(f, -1, axis=1)], -1).reshape(-1, 2)
+    key = np.sort(half, axis=1)
+    face = np.repeat(np.arange(len(f)), 3)
+    order = np.lexsort((key[:, 1], key[:, 0]))
+    key, face = key[order], face[order]
+    same = (key[1:] == key[:-1]).all(axis=1)
+    cos = np.sum(t[face[1:][same]] * t[face[:-1][same]], axis=1)
+    return np.degrees(np.arccos(np.clip(cos, -1, 1)))
+
+
+def test_the_warp_direction_does_not_quilt(garment):
+    """Mitsuba takes the BSDF's warp from ∂p/∂u, constant per triangle.  With UVs split
+    linearly under Loop-moved positions it swings between neighbouring triangles in a
+    pattern of the simulation grid (a quilted diamond pattern in the satin highlight,
+    seen at 640×360); with Loop's weights on the UVs too it turns smoothly: the 99th
+    percentile of the turn between neighbouring triangles must at least halve (measured
+    at resolution 48: 27° linear, 8.7° with Loop UVs; medians 6.5° and 0.6°)."""
+    q = garment.positions
+    turns = {}
+    for smooth in (False, True):
+        sm = SmoothMesh(garment.output_faces, garment.output_uv, garment.seams, levels=1, smooth_uv=smooth)
+        p, _ = sm.apply(q)
+        turns[smooth] = float(np.percentile(_neighbour_turn_deg(_dpdu(p, sm.uv, sm.faces), sm.faces), 99))
+    assert turns[True] < 0.5 * turns[False], turns

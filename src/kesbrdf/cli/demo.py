@@ -17,9 +17,9 @@ from kesbrdf.cli._common import check_output, stderr
 HELP = "Run the full chain on the embedded sample: ingest, fit, validate, figures, report, renders."
 
 
-#: Frames of the garment drape: 2.2 s at 30 fps (settle 0.6 s, a 90° turn over 1.2 s,
-#: 0.4 s of swing); the clip starts at frame 17 (render.demo.CLIP_FIRST_FRAME): 49 frames.
-GARMENT_FRAMES = 66
+#: The garment drape is the showcase preview's (kesbrdf.render.showcase.PREVIEW: cloth
+#: resolution 40, 0.75 s of settling, a 180° turn, 5.25 s at 24 fps); the full clip is
+#: ``kesbrdf showcase``.
 
 
 def add_arguments(p):
@@ -80,6 +80,47 @@ class _Stages:
                                                         "total_cpu_s": round(cpu, 2)}, indent=1) + "\n")
 
 
+class _EarlyCluster:
+    """The batch step's local Dask cluster, started in a thread while the earlier steps run.
+
+    Starting two spawned worker processes (each importing numpy, scipy and kesbrdf) took
+    most of the batch step's wall time on a loaded machine, with the demo's own process
+    idle meanwhile; started at the beginning of the demo, the workers are up by the time
+    the batch step needs them.  A failure to start falls back to the batch's own cluster.
+    """
+
+    def __init__(self, workers: int = 2):
+        import threading
+
+        self.cluster = None
+        self.error = None
+
+        def start():
+            try:
+                from kesbrdf.batch.engine import start_local_cluster
+
+                self.cluster = start_local_cluster(workers)
+            except Exception as exc:  # pragma: no cover - reported, then the batch starts its own
+                self.error = exc
+
+        self.thread = threading.Thread(target=start, name="kesbrdf-demo-cluster", daemon=True)
+        self.thread.start()
+
+    def client(self):
+        """A client of the started cluster, or None (the batch then starts its own)."""
+        self.thread.join()
+        if self.cluster is None:
+            return None
+        from distributed import Client
+
+        return Client(self.cluster)
+
+    def close(self) -> None:
+        self.thread.join()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
 def run(args) -> int:
     import kesbrdf
     from kesbrdf.measure import demo_data
@@ -91,6 +132,8 @@ def run(args) -> int:
     out = check_output(args.output, folder=True)
     out.mkdir(parents=True, exist_ok=True)
     say = _Stages()
+    batch_wanted = not args.quick and _have("distributed") and _have("kesbrdf.batch.demo")
+    cluster = _EarlyCluster() if batch_wanted else None
 
     # 1. acquire: images -> values when the image-based sample is available
     meas_path = out / "measurement.csv"
@@ -185,11 +228,19 @@ def run(args) -> int:
         _renders(out, model_path, say)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
-    if not args.quick and _have("distributed") and _have("kesbrdf.batch.demo"):
+    if batch_wanted:
         from kesbrdf.batch.demo import run_demo_batch
 
-        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster")
-        run_demo_batch(out / "batch", quick=args.quick, progress=say)
+        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster (started with the demo)")
+        try:
+            client = cluster.client()
+            try:
+                run_demo_batch(out / "batch", quick=args.quick, progress=say, scheduler=client)
+            finally:
+                if client is not None:
+                    client.close()
+        finally:
+            cluster.close()
     say.summary(out)
     stderr(f"demo outputs in {out}/")
     stderr(f"open the interactive viewer on this model:  kesbrdf view {model_path}")
@@ -294,9 +345,11 @@ def _renders(out: Path, model_path: Path, say) -> None:
 
         say("drape: satin sheet onto a sphere (newton XPBD, 48x48)")
         drape_dir = simulate_drape("sphere", out / "drape", frames=40, progress=frames("sheet"))
-        say("drape: six-gore skirt sewn from pattern panels on the turning mannequin (newton XPBD)")
-        garment_dir = simulate_drape("garment", out / "garment", frames=GARMENT_FRAMES, resolution=40,
-                                     turn_deg=90.0, turn_start_s=0.6, turn_duration_s=1.2, progress=frames("skirt"))
+        from kesbrdf.render.showcase import PREVIEW
+
+        say("drape: six-gore skirt (bias-cut front) sewn from pattern panels on the mannequin turning 180° (newton XPBD)")
+        garment_dir = simulate_drape("garment", out / "garment", frames=PREVIEW.sim_frames, overwrite=True,
+                                     progress=frames("skirt"), **PREVIEW.drape_kwargs())
     else:
         say("drape skipped (install kesbrdf[cloth])")
     say("render: sphere, draped garment, animation, colourways (Mitsuba 3)")

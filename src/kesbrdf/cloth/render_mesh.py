@@ -16,8 +16,12 @@ see (docs/drape.md, "The render mesh"):
    the hem), an old vertex moves to (1 − nβ) v + β Σ neighbours with
    β = (5/8 − (3/8 + ¼ cos 2π/n)²)/n for valence n (¾ v + ⅛ of its two boundary
    neighbours on a boundary).  The limit surface is C² away from extraordinary vertices;
-   after one level a 1.7 cm cell is four of 8 mm.  UVs are interpolated linearly on each
-   panel (Loop's rules would blur them across the seams).
+   after one level a 1.7 cm cell is four of 8 mm.  The UVs get the same weights on each
+   panel, with the panel's seams as boundaries (so they do not blur across a seam).
+   They must: Mitsuba takes the warp direction of the BSDF from ∂p/∂u, constant over a
+   triangle, and UVs interpolated linearly under Loop-moved positions make ∂p/∂u swing
+   from triangle to triangle in a pattern of the simulation grid, which an anisotropic
+   satin's highlight shows as a quilted diamond pattern (seen at 640×360).
 3. **Normals** are the area-weighted vertex normals of the welded, subdivided mesh.
 
 The whole operator is linear in the simulated positions: it is built once per garment
@@ -123,9 +127,11 @@ class SmoothMesh:
     uv : (N, 2) texture coordinates of the frame's vertices.
     seams : (P, 2) stitched vertex pairs, or None.
     levels : Loop subdivision levels (0: weld and smooth normals only).
+    smooth_uv : subdivide the UVs with Loop's weights too (on each panel, its seams as
+        boundaries) instead of linearly (module docstring, step 2).
     """
 
-    def __init__(self, faces, uv, seams=None, levels: int = 1):
+    def __init__(self, faces, uv, seams=None, levels: int = 1, smooth_uv: bool = True):
         faces = np.asarray(faces, np.int64)
         uv = np.asarray(uv, np.float64)
         n = len(uv)
@@ -145,7 +151,12 @@ class SmoothMesh:
             pedges, corner = _edges(faces)
             wkey = np.sort(w[pedges], axis=1)
             pos = np.searchsorted(edges_w[:, 0] * (n_w + 1) + edges_w[:, 1], wkey[:, 0] * (n_w + 1) + wkey[:, 1])
-            uv = np.concatenate([uv, 0.5 * (uv[pedges[:, 0]] + uv[pedges[:, 1]])])
+            if smooth_uv:  # the same Loop weights on each panel (its seams are boundaries there)
+                S_p, _, pedges_p = loop_step(len(uv), faces)
+                assert np.array_equal(pedges_p, pedges)
+                uv = S_p @ uv
+            else:
+                uv = np.concatenate([uv, 0.5 * (uv[pedges[:, 0]] + uv[pedges[:, 1]])])
             w = np.concatenate([w, n_w + pos])
             m = len(w) - len(pedges) + corner
             a, b, c = faces[:, 0], faces[:, 1], faces[:, 2]
