@@ -121,6 +121,49 @@ class _EarlyCluster:
             self.cluster.close()
 
 
+def _simulate_demo_drapes(out: str) -> float:
+    """Both drapes of the demo (sheet, skirt), in a background process; returns its CPU s."""
+    from kesbrdf.cloth.drape import simulate_drape
+    from kesbrdf.render.showcase import PREVIEW
+
+    c0 = time.process_time()
+    simulate_drape("sphere", Path(out) / "drape", frames=SHEET_FRAMES)
+    simulate_drape("garment", Path(out) / "garment", frames=PREVIEW.sim_frames, overwrite=True,
+                   **PREVIEW.drape_kwargs())
+    return time.process_time() - c0
+
+
+#: Frames of the sheet falling onto the sphere (30 fps).
+SHEET_FRAMES = 40
+
+
+class _EarlyDrapes:
+    """The drapes, simulated in a spawned process from the start of the demo.
+
+    They need no model, and the steps before the renders leave a core idle (the fit is
+    single-threaded, the export looks wait on Blender and Chromium): on two cores the
+    simulation (about 40 s of CPU) then costs no wall time.  The render step waits for it
+    and calls :func:`~kesbrdf.cloth.drape.simulate_drape` again, which finds the finished
+    folders (or resumes them, should the background run have failed).
+    """
+
+    def __init__(self, out: Path):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        self.future = self.pool.submit(_simulate_demo_drapes, str(out))
+
+    def wait(self) -> tuple[float | None, str | None]:
+        """(CPU s of the background run or None, its error or None)."""
+        try:
+            return self.future.result(), None
+        except Exception as exc:  # resumed in-process by the caller
+            return None, f"{type(exc).__name__}: {exc}"
+        finally:
+            self.pool.shutdown()
+
+
 def run(args) -> int:
     import kesbrdf
     from kesbrdf.measure import demo_data
@@ -134,6 +177,7 @@ def run(args) -> int:
     say = _Stages()
     batch_wanted = not args.quick and _have("distributed") and _have("kesbrdf.batch.demo")
     cluster = _EarlyCluster() if batch_wanted else None
+    drapes = _EarlyDrapes(out) if not args.quick and _have("newton") and _have("mitsuba") else None
 
     # 1. acquire: images -> values when the image-based sample is available
     meas_path = out / "measurement.csv"
@@ -225,7 +269,7 @@ def run(args) -> int:
         say("figures + report skipped (install kesbrdf[plot])")
 
     if not args.quick:
-        _renders(out, model_path, say)
+        _renders(out, model_path, say, drapes)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
     if batch_wanted:
@@ -327,7 +371,11 @@ def _comparisons(out: Path, reference, say) -> list:
     return results
 
 
-def _renders(out: Path, model_path: Path, say) -> None:
+def _renders(out: Path, model_path: Path, say, drapes: _EarlyDrapes | None = None) -> None:
+    if drapes is not None:
+        say("drape: waiting for the sheet and the skirt, simulated in a background process since the demo started")
+        cpu, error = drapes.wait()
+        stderr(f"    background drapes: {f'{cpu:.1f} s of CPU' if cpu is not None else f'failed ({error}), resumed here'}")
     if not (_have("mitsuba") and _have("kesbrdf.render.scenes")):
         say("renders skipped (install kesbrdf[render])")
         return
@@ -344,7 +392,7 @@ def _renders(out: Path, model_path: Path, say) -> None:
             return report
 
         say("drape: satin sheet onto a sphere (newton XPBD, 48x48)")
-        drape_dir = simulate_drape("sphere", out / "drape", frames=40, progress=frames("sheet"))
+        drape_dir = simulate_drape("sphere", out / "drape", frames=SHEET_FRAMES, progress=frames("sheet"))
         from kesbrdf.render.showcase import PREVIEW
 
         say("drape: six-gore skirt (bias-cut front) sewn from pattern panels on the mannequin turning 180° (newton XPBD)")

@@ -91,7 +91,7 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
         from kesbrdf.render import showcase as _showcase
 
         spec = replace(_showcase.PREVIEW, spp=clip_spp)
-        say(f"render: clip preview, {spec.frames} frames a quarter of the clip apart ({spec.size[0]}x{spec.size[1]}, "
+        say(f"render: clip preview, {spec.frames} frames spread over the clip ({spec.size[0]}x{spec.size[1]}, "
             f"{spec.spp} spp + OIDN); the full 1280x720 clip: kesbrdf showcase (make showcase)")
         res = _showcase.run_showcase(model_path, out, spec, name="garment_preview", drape_dir=garment.root,
                                      render_progress=frames)
