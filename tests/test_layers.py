@@ -1,4 +1,4 @@
-"""The package's import graph respects its layers (DESIGN §6, docs/models.md).
+"""The package's import graph respects its layers (docs/architecture.md, "Layers", docs/models.md).
 
 Every module of ``src/kesbrdf`` is parsed with :mod:`ast` (imports inside functions
 count too: a lazy import is still a dependency), and the test fails when
@@ -31,7 +31,7 @@ PACKAGE = SRC / "kesbrdf"
 #: (layer name, module-name prefixes).  A module belongs to the first layer with the
 #: longest matching prefix.
 LAYERS = [
-    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry",
+    ("base", ["kesbrdf.errors", "kesbrdf._version", "kesbrdf._atomic", "kesbrdf._drjit", "kesbrdf.geometry", "kesbrdf.optics",
               "kesbrdf.models.mappings", "kesbrdf.references.marginal2d"]),
     ("measurement", ["kesbrdf.measure", "kesbrdf.measure.measurement"]),
     ("io", ["kesbrdf.io", "kesbrdf.models.base", "kesbrdf.references", "kesbrdf.measure.gonio",
@@ -40,10 +40,13 @@ LAYERS = [
     ("model", ["kesbrdf.models"]),
     ("brdf", ["kesbrdf.models.brdf"]),
     ("validate", ["kesbrdf.validate"]),
-    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.measure.planning"]),
+    ("fitting", ["kesbrdf.fitting", "kesbrdf", "kesbrdf.measure.planning", "kesbrdf.pipeline"]),
     # The applications, in order: cli over batch over the four views over cloth.
     ("cloth", ["kesbrdf.cloth"]),
     ("views", ["kesbrdf.plotting", "kesbrdf.render", "kesbrdf.viewer", "kesbrdf.export"]),
+    # the pipeline's steps that write through the views (report, export, preview); its
+    # steps up to validation are at the fitting layer, so the views may call the fit
+    ("pipeline outputs", ["kesbrdf.pipeline.outputs"]),
     ("batch", ["kesbrdf.batch"]),
     ("cli", ["kesbrdf.cli"]),
 ]

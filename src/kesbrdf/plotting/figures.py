@@ -17,10 +17,11 @@ The plotted quantity ("ρ" in the paper) is the KES quantity of the model,
 in 1/sr.  Model curves in Fig. 3 and 4 are the model evaluated (``deviation`` mapping
 by default) at the in-plane geometry of the paper's protocol, θ_i = 45° − γ/2,
 θ_r = 45° + γ/2 at orientation ψ, converted to q: they include the body term and pass
-through every measured in-plane sample of that protocol (DESIGN §4 round trip).  Fig. 5
-plots the model's table itself, ``lookup(model, φ, γ)``: the lobe q without the body.
+through every measured in-plane sample of that protocol (docs/method.md, "From the table to a BRDF": round trip).  Fig. 5
+plots the model's table itself, ``lookup(model.table_view(), φ, γ)``: the lobe q without the body
+(every kind has one: a kind without a (φ, γ) table is tabulated through ``evaluate``).
 
-Orientation and azimuth (DESIGN §2, §4): in Fig. 3 and Fig. 4 the angle is the
+Orientation and azimuth (docs/method.md, "Conventions"): in Fig. 3 and Fig. 4 the angle is the
 orientation ψ of the plane of incidence (viewer azimuth).  For γ ≥ 0 it is the
 deviation azimuth φ; for γ < 0 the deviation points the other way, φ = ψ + π, which is
 the paper's "negative γ means azimuth φ + π".
@@ -562,7 +563,7 @@ def model_in_plane(model, psi, gamma, mapping: str | None = None) -> np.ndarray:
     """The model's q at the paper's in-plane geometry for orientation ψ and signed γ.
 
     θ_i = π/4 − γ/2, θ_r = π/4 + γ/2, light at azimuth ψ + π, viewer at ψ
-    (DESIGN §1–2); returns ``evaluate(model, wi, wr, mapping) · √(cos θ_i cos θ_r)``.
+    (docs/method.md, "Conventions"); returns ``evaluate(model, wi, wr, mapping) · √(cos θ_i cos θ_r)``.
 
     Parameters
     ----------
@@ -649,7 +650,9 @@ def _require(obj, what: str, figure: str):
 
 
 def _gamma_max(model) -> float:
-    return float(min(np.max(model.gamma_grid), np.radians(GAMMA_LIMIT_DEG)))
+    """Largest |γ| of a model curve: the model's table's (its tabulated view for kinds
+    without one), at most :data:`GAMMA_LIMIT_DEG`."""
+    return float(min(np.max(model.table_view().gamma_grid), np.radians(GAMMA_LIMIT_DEG)))
 
 
 def _model_channels(model):
@@ -756,7 +759,7 @@ def figure_3b(model=None, measurement=None, reference=None, *, channel=None, map
 
 
 def _measured_at_gamma(measured: dict, gamma_deg: float):
-    """Measured (angle, q) at signed γ: ψ with γ, and ψ + 180° with −γ (DESIGN §4)."""
+    """Measured (angle, q) at signed γ: ψ with γ, and ψ + 180° with −γ (docs/method.md, "From the table to a BRDF")."""
     phis, values = [], []
     for sign, offset in ((1.0, 0.0), (-1.0, 180.0)):
         # at γ = 0 both halves are the same sample, drawn at ψ and at ψ + 180°
@@ -813,8 +816,9 @@ def figure_5(model=None, measurement=None, reference=None, *, gamma_deg=None, ch
     """Paper Fig. 5: the spherical model in three projections.
 
     Each curve is one γ: the point at angle γ from the mirror direction z, azimuth φ
-    from the warp x toward the weft y, at radius ρ = ``lookup(model, φ, γ)`` (the
-    tabulated lobe q, 1/sr, without the body term), i.e.
+    from the warp x toward the weft y, at radius ρ = ``lookup(model.table_view(), φ, γ)``
+    (the tabulated lobe q, 1/sr, without the body term; a kind without a (φ, γ) table is
+    tabulated through its evaluation, :func:`kesbrdf.models.table.tabulate`), i.e.
     (x, y, z) = ρ·(sin γ cos φ, sin γ sin φ, cos γ).  Panels follow the paper's
     caption: (a) weft (horizontal) vs warp, (b) weft vs specular, (c) warp vs specular.
 
@@ -832,15 +836,15 @@ def figure_5(model=None, measurement=None, reference=None, *, gamma_deg=None, ch
     """
     from kesbrdf.models import brdf
 
-    _require(model, "model", "5")
+    table = _require(model, "model", "5").table_view()
     if gamma_deg is None:
-        gamma_deg = np.arange(0.0, np.degrees(np.max(model.gamma_grid)) + 1e-9, 12.0)
+        gamma_deg = np.arange(0.0, np.degrees(np.max(table.gamma_grid)) + 1e-9, 12.0)
     gamma_deg = np.atleast_1d(np.asarray(gamma_deg, float))
     if np.any(gamma_deg < 0):
         raise KesbrdfError(f"figure 5: expected γ ≥ 0 (the model's domain), got {gamma_deg.min():g}°")
     phi = np.linspace(0.0, 2 * np.pi, n_phi)
     gamma = np.radians(gamma_deg)
-    rho = np.asarray(brdf.lookup(model, phi[None, :], gamma[:, None]), float)
+    rho = np.asarray(brdf.lookup(table, phi[None, :], gamma[:, None]), float)
     rho, label = select_channel(rho, _model_channels(model), channel)
     if normalise:
         peak = np.max(np.abs(rho), axis=1, keepdims=True)
@@ -858,7 +862,8 @@ def figure_5(model=None, measurement=None, reference=None, *, gamma_deg=None, ch
     for k, (h, v, xl, yl, title) in enumerate(panels):
         ax = fig.add_subplot(1, 3, k + 1)
         plot_spherical_projection(ax, h, v, gamma_deg=gamma_deg, xlabel=xl, ylabel=yl, title=title)
-    fig.suptitle(f"Fig. 5  spherical model, radius = lobe q ({label})")
+    what = "lobe q" if model.has_table else f"lobe q tabulated from the {model.kind} model"
+    fig.suptitle(f"Fig. 5  spherical model, radius = {what} ({label})")
     return attach_provenance(fig, provenance(model, measurement, figure="5", channel=label,
                                              gamma_deg=gamma_deg, normalise=normalise))
 
@@ -1051,18 +1056,6 @@ def _albedo_grid(diagnostics):
     return t, p, a.reshape(t.size, p.size)
 
 
-#: Model kinds each figure can draw (``make_figure`` gives a one-line error for the
-#: rest): Fig. 3 and 5 read the ``kes`` table ρ(φ, γ) itself; Fig. 4, 6 and the albedo
-#: evaluate the BRDF, which every kind can.
-FIGURE_KINDS = {
-    "3a": ("kes",),
-    "3b": ("kes",),
-    "4": ("kes", "kes-halfdiff"),
-    "5": ("kes",),
-    "6": ("kes", "kes-halfdiff"),
-    "albedo": ("kes", "kes-halfdiff"),
-}
-
 #: Figure name -> builder; every builder takes ``model=, measurement=, reference=``.
 FIGURES = {
     "3a": figure_3a,
@@ -1079,9 +1072,6 @@ def make_figure(name: str, model=None, measurement=None, reference=None, **kwarg
     if name not in builders:
         raise KesbrdfError(f"expected a figure in {', '.join(builders)}, got {name!r}")
     if model is not None:
-        from kesbrdf.models.base import require_kind
-
-        require_kind(model, FIGURE_KINDS[name], f"figure {name}")
         if name in ("3a", "3b", "4", "6"):  # the figures that evaluate the model
             kwargs["mapping"] = model.check_mapping(kwargs.get("mapping"))
     return builders[name](model=model, measurement=measurement, reference=reference, **kwargs)
