@@ -20,9 +20,9 @@ from kesbrdf.cli._common import check_output, stderr
 HELP = "Run the full chain on the embedded sample: ingest, fit, validate, figures, report, renders."
 
 
-#: Frames of the garment drape: 2.2 s at 30 fps (settle 0.6 s, a 90° turn over 1.2 s,
-#: 0.4 s of swing); the clip starts at frame 17 (render.demo.CLIP_FIRST_FRAME): 49 frames.
-GARMENT_FRAMES = 66
+#: The garment drape is the showcase preview's (kesbrdf.render.showcase.PREVIEW: cloth
+#: resolution 40, 0.75 s of settling, a 180° turn, 5.25 s at 24 fps); the full clip is
+#: ``kesbrdf showcase``.
 
 
 def add_arguments(p):
@@ -83,6 +83,90 @@ class _Stages:
                                                         "total_cpu_s": round(cpu, 2)}, indent=1) + "\n")
 
 
+class _EarlyCluster:
+    """The batch step's local Dask cluster, started in a thread while the earlier steps run.
+
+    Starting two spawned worker processes (each importing numpy, scipy and kesbrdf) took
+    most of the batch step's wall time on a loaded machine, with the demo's own process
+    idle meanwhile; started at the beginning of the demo, the workers are up by the time
+    the batch step needs them.  A failure to start falls back to the batch's own cluster.
+    """
+
+    def __init__(self, workers: int = 2):
+        import threading
+
+        self.cluster = None
+        self.error = None
+
+        def start():
+            try:
+                from kesbrdf.batch.engine import start_local_cluster
+
+                self.cluster = start_local_cluster(workers)
+            except Exception as exc:  # pragma: no cover - reported, then the batch starts its own
+                self.error = exc
+
+        self.thread = threading.Thread(target=start, name="kesbrdf-demo-cluster", daemon=True)
+        self.thread.start()
+
+    def client(self):
+        """A client of the started cluster, or None (the batch then starts its own)."""
+        self.thread.join()
+        if self.cluster is None:
+            return None
+        from distributed import Client
+
+        return Client(self.cluster)
+
+    def close(self) -> None:
+        self.thread.join()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def _simulate_demo_drapes(out: str) -> float:
+    """Both drapes of the demo (sheet, skirt), in a background process; returns its CPU s."""
+    from kesbrdf.cloth.drape import simulate_drape
+    from kesbrdf.render.showcase import PREVIEW
+
+    c0 = time.process_time()
+    simulate_drape("sphere", Path(out) / "drape", frames=SHEET_FRAMES)
+    simulate_drape("garment", Path(out) / "garment", frames=PREVIEW.sim_frames, overwrite=True,
+                   **PREVIEW.drape_kwargs())
+    return time.process_time() - c0
+
+
+#: Frames of the sheet falling onto the sphere (30 fps).
+SHEET_FRAMES = 40
+
+
+class _EarlyDrapes:
+    """The drapes, simulated in a spawned process from the start of the demo.
+
+    They need no model, and the steps before the renders leave a core idle (the fit is
+    single-threaded, the export looks wait on Blender and Chromium): on two cores the
+    simulation (about 40 s of CPU) then costs no wall time.  The render step waits for it
+    and calls :func:`~kesbrdf.cloth.drape.simulate_drape` again, which finds the finished
+    folders (or resumes them, should the background run have failed).
+    """
+
+    def __init__(self, out: Path):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        self.future = self.pool.submit(_simulate_demo_drapes, str(out))
+
+    def wait(self) -> tuple[float | None, str | None]:
+        """(CPU s of the background run or None, its error or None)."""
+        try:
+            return self.future.result(), None
+        except Exception as exc:  # resumed in-process by the caller
+            return None, f"{type(exc).__name__}: {exc}"
+        finally:
+            self.pool.shutdown()
+
+
 def _attempt(label: str, fn, notes: list, default=None):
     """Run one consumer of the model; a failure is a one-line note, never a crash.
 
@@ -113,6 +197,9 @@ def run(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     say = _Stages()
     notes: list[str] = []
+    batch_wanted = not args.quick and _have("distributed") and _have("kesbrdf.batch.demo")
+    cluster = _EarlyCluster() if batch_wanted else None
+    drapes = _EarlyDrapes(out) if not args.quick and _have("newton") and _have("mitsuba") else None
 
     # 1. acquire: images -> values when the image-based sample is available
     meas_path = out / "measurement.csv"
@@ -202,14 +289,26 @@ def run(args) -> int:
         say("figures + report skipped (install kesbrdf[plot])")
 
     if not args.quick:
-        _attempt("renders", lambda: _renders(out, model_path, say), notes)
+        _attempt("renders", lambda: _renders(out, model_path, say, drapes), notes)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
-    if not args.quick and _have("distributed") and _have("kesbrdf.batch.demo"):
+    if batch_wanted:
         from kesbrdf.batch.demo import run_demo_batch
 
-        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster")
-        _attempt("batch", lambda: run_demo_batch(out / "batch", quick=args.quick, progress=say), notes)
+        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster (started with the demo)")
+
+        def batch():
+            client = cluster.client()
+            try:
+                return run_demo_batch(out / "batch", quick=args.quick, progress=say, scheduler=client)
+            finally:
+                if client is not None:
+                    client.close()
+
+        try:
+            _attempt("batch", batch, notes)
+        finally:
+            cluster.close()
     say.summary(out)
     write_text(out / "demo_notes.json", json.dumps({"model": str(model_path), "model_kind": fitted.kind,
                                                      "model_sha256": fitted.sha256, "notes": notes}, indent=1) + "\n")
@@ -301,7 +400,11 @@ def _comparisons(out: Path, reference, say) -> list:
     return results
 
 
-def _renders(out: Path, model_path: Path, say) -> None:
+def _renders(out: Path, model_path: Path, say, drapes: _EarlyDrapes | None = None) -> None:
+    if drapes is not None:
+        say("drape: waiting for the sheet and the skirt, simulated in a background process since the demo started")
+        cpu, error = drapes.wait()
+        stderr(f"    background drapes: {f'{cpu:.1f} s of CPU' if cpu is not None else f'failed ({error}), resumed here'}")
     if not (_have("mitsuba") and _have("kesbrdf.render.scenes")):
         say("renders skipped (install kesbrdf[render])")
         return
@@ -318,10 +421,12 @@ def _renders(out: Path, model_path: Path, say) -> None:
             return report
 
         say("drape: satin sheet onto a sphere (newton XPBD, 48x48)")
-        drape_dir = simulate_drape("sphere", out / "drape", frames=40, progress=frames("sheet"))
-        say("drape: six-gore skirt sewn from pattern panels on the turning mannequin (newton XPBD)")
-        garment_dir = simulate_drape("garment", out / "garment", frames=GARMENT_FRAMES, resolution=40,
-                                     turn_deg=90.0, turn_start_s=0.6, turn_duration_s=1.2, progress=frames("skirt"))
+        drape_dir = simulate_drape("sphere", out / "drape", frames=SHEET_FRAMES, progress=frames("sheet"))
+        from kesbrdf.render.showcase import PREVIEW
+
+        say("drape: six-gore skirt (bias-cut front) sewn from pattern panels on the mannequin turning 180° (newton XPBD)")
+        garment_dir = simulate_drape("garment", out / "garment", frames=PREVIEW.sim_frames, overwrite=True,
+                                     progress=frames("skirt"), **PREVIEW.drape_kwargs())
     else:
         say("drape skipped (install kesbrdf[cloth])")
     say("render: sphere, draped garment, animation, colourways (Mitsuba 3)")

@@ -25,18 +25,14 @@ DEMO_COLOUR = None
 
 #: Stills: 1280×720, studio lights + HDR room, ACES, denoised.
 STILL_SPP = 8
-#: The clip: rendered at CLIP_RENDER_SIZE with CLIP_SPP and OIDN, written at 1280×720
-#: (Lanczos); native 720p at full quality is ``kesbrdf render --animation ...
-#: --resolution 1280x720 --spp 64 --denoise`` (docs/rendering.md).  Measured in one run
-#: on the shared 2-core machine: a 640×360 frame at 4 spp + OIDN, upscaled, costs 1.6 s
-#: of CPU; a native 1280×720 frame at the least possible 1 spp costs 2.8–3.0 s (path
-#: tracing 1.2–1.4 s, OIDN at four times the pixels 1.5 s; OIDN's "fast" mode halves
-#: that but leaves speckles along the silhouettes).  For 49 frames that is 60–70 s more,
-#: which takes the demo (160 s) past its 3 minutes, so the demo upscales.
+#: The clip: ``kesbrdf demo`` renders the showcase's preview (render.showcase.PREVIEW:
+#: four frames a quarter of the clip apart at 640×360, 4 spp + OIDN); the full clip,
+#: native 1280×720 at 24 fps, is ``kesbrdf showcase`` (``make showcase``).  The former
+#: demo clip (49 frames at 640×360 upscaled to 720p) took 88 s of the demo's CPU.
 CLIP_SPP = 4
 CLIP_RENDER_SIZE = (640, 360)
-#: First drape frame of the clip (the skirt has settled; the turn starts at 0.6 s).
-CLIP_FIRST_FRAME = 17
+#: First drape frame of the clip: the end of the showcase's settling (0.75 s at 24 fps).
+CLIP_FIRST_FRAME = 18
 
 
 def _can_denoise() -> bool:
@@ -58,7 +54,8 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
     procedural drape sequence stands in.  ``garment_dir`` is a ``kesbrdf drape --scene
     garment`` folder (the sewn skirt on the turning mannequin): its last frame is the
     garment still and the colourways, and frames from ``clip_first_frame`` on are the
-    clip (``garment.mp4`` at 1280×720 and ``garment.gif`` at 640×360).  Without it the
+    clip preview (``garment_preview.mp4``/``.gif``/``_strip.png``: four frames at 640×360;
+    ``garment_dir`` must hold the drape of :data:`kesbrdf.render.showcase.PREVIEW`).  Without it the
     older primitive dress form and a procedural skirt stand in, and the sphere drape is
     animated instead.  ``progress`` is called with one line of text per step.
     """
@@ -89,15 +86,18 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
             say(f"  frame {done}/{total}{' (kept)' if skipped else ''}")
 
     if garment_scene == "garment":
-        clip = _studio(clip_spp, resolution=CLIP_RENDER_SIZE, max_depth=3)
-        first = min(clip_first_frame, len(garment.frames) - 1)
-        say(f"render: clip of {len(garment.frames) - first} frames ({CLIP_RENDER_SIZE[0]}x{CLIP_RENDER_SIZE[1]}, "
-            f"{clip_spp} spp + OIDN, upscaled to 1280x720: native 720p is ~1.8x the CPU a frame, "
-            "past the demo's 3 min; docs/rendering.md)")
-        written["animation"] = _animation.render_animation(
-            model_path, garment.root, out / "garment.mp4", clip, progress=frames, first_frame=first,
-            gif=out / "garment.gif", gif_width=640, upscale_to=(1280, 720))
-        written["gif"] = out / "garment.gif"
+        from dataclasses import replace
+
+        from kesbrdf.render import showcase as _showcase
+
+        spec = replace(_showcase.PREVIEW, spp=clip_spp)
+        say(f"render: clip preview, {spec.frames} frames spread over the clip ({spec.size[0]}x{spec.size[1]}, "
+            f"{spec.spp} spp + OIDN); the full 1280x720 clip: kesbrdf showcase (make showcase)")
+        res = _showcase.run_showcase(model_path, out, spec, name="garment_preview", drape_dir=garment.root,
+                                     render_progress=frames)
+        written["animation"] = res["video"]
+        written["gif"] = res["gif"]
+        written["strip"] = res["strip"]
     else:
         anim = _scenes.RenderOptions(spp=16, resolution=(240, 180), base_color=DEMO_COLOUR, env="studio", light="area")
         say(f"render: animation of {len(drape.frames)} frames")
