@@ -35,15 +35,9 @@ CLIP_RENDER_SIZE = (640, 360)
 CLIP_FIRST_FRAME = 18
 
 
-def _can_denoise() -> bool:
-    import importlib.util
-
-    return importlib.util.find_spec("pyoidn") is not None
-
 
 def _studio(spp: int, resolution=(1280, 720), **kw):
-    return _scenes.RenderOptions(spp=spp, resolution=resolution, base_color=DEMO_COLOUR, env="studio-hdr",
-                                 light="studio", tonemap="aces", denoise=_can_denoise(), **kw)
+    return _scenes.studio_options(spp, resolution, base_color=DEMO_COLOUR, **kw)
 
 
 def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=None,
@@ -104,7 +98,7 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
         written["animation"] = _animation.render_animation(model_path, drape.root, out / "drape.mp4", anim,
                                                            progress=frames)
     sheet = _scenes.RenderOptions(spp=16, resolution=(200, 240), env="studio-hdr", light="studio",
-                                  denoise=_can_denoise())
+                                  denoise=_scenes.can_denoise())
     say("render: colourways")
     written["colourways"] = _colourways.render_colourways(
         model_path, out / "colourways.png", sheet, scene=garment_scene, drape=garment

@@ -612,3 +612,17 @@ def render_still(model_path, scene: str, output, opts: RenderOptions, drape=None
     sc = load_scene(model_path, scene, opts, drape=drape, frame=frame)
     img = render_scene(sc, opts)
     return save_image(output, img, provenance(model_path, scene, opts, drape), opts.exposure, opts.tonemap)
+
+
+def can_denoise() -> bool:
+    """True when OIDN (``pyoidn``) is installed, so renders may be denoised."""
+    import importlib.util
+
+    return importlib.util.find_spec("pyoidn") is not None
+
+
+def studio_options(spp: int, resolution=(1280, 720), base_color=None, **kw) -> RenderOptions:
+    """The studio look of the demo and the showcase: lights + HDR room, ACES, OIDN when
+    installed (docs/rendering.md, "Studio"); ``base_color`` None keeps the measured body."""
+    return RenderOptions(spp=spp, resolution=resolution, base_color=base_color, env="studio-hdr",
+                         light="studio", tonemap="aces", denoise=can_denoise(), **kw)

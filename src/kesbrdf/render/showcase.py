@@ -129,14 +129,14 @@ def run_showcase(model_path, out_dir, spec: ShowcaseSpec = SHOWCASE, name: str =
     """
     from kesbrdf.cloth.drape import simulate_drape
     from kesbrdf.render import animation as _animation
-    from kesbrdf.render import demo as _demo
+    from kesbrdf.render import scenes as _scenes
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     drape_dir = Path(drape_dir) if drape_dir is not None else out / f"{name}_drape"
     simulate_drape("garment", drape_dir, spec.sim_frames, overwrite=True, progress=sim_progress,
                    **spec.drape_kwargs())
-    opts = opts or _demo._studio(spec.spp, resolution=tuple(spec.size), max_depth=3)
+    opts = opts or _scenes.studio_options(spec.spp, resolution=tuple(spec.size), max_depth=3)
     frames = clip_frames(spec)
     video = out / f"{name}.mp4"
     gif = out / f"{name}.gif"
