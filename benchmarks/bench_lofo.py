@@ -68,6 +68,7 @@ def fitters(names=None) -> dict:
     }
     if "fibre-coord" in known_kinds():
         out["fibre-coord"] = lambda m: fit(m, kind="fibre-coord")[0]
+        out["kes-line"] = lambda m: fit(m, kind="kes")[0]
         out["default"] = lambda m: fit(m)[0]
     return {k: v for k, v in out.items() if names is None or k in names}
 
