@@ -69,7 +69,7 @@ def test_option_that_does_not_apply_is_an_error():
         kesbrdf.fit(m, interpolation="linear")
     with pytest.raises(KesbrdfError, match="banana_option \\(not an option of any kind\\)"):
         kesbrdf.fit(m, kind="kes", banana_option=1)
-    with pytest.raises(KesbrdfError, match="expected kind one of auto, kes, kes-halfdiff, fibre-prior, scattered, got 'banana'"):
+    with pytest.raises(KesbrdfError, match="expected kind one of auto, kes, kes-halfdiff, fibre-prior, fibre-coord, scattered, got 'banana'"):
         kesbrdf.fit(m, kind="banana")
 
 

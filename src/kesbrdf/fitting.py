@@ -215,6 +215,12 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             mask, why_not = fitter_class(name).usable_rows(m)
             options = dict(PRIOR_CANDIDATES[comparison["kept"]])
             why = f"{comparison['kept']} kept by leave-one-orientation-out validation on this data ({comparison['why']})"
+    elif kind == "auto" and compare and not options and not strict and name == "kes-halfdiff":
+        comparison = _dense_rule(m)
+        if comparison and comparison["kept"] != name:
+            name = comparison["kept"]
+            mask, why_not = fitter_class(name).usable_rows(m)
+            why = f"{name} kept by the dense rule ({comparison['why']})"
     cls = fitter_class(name)
     _check_options(name, cls, options, strict)
     if strict:
@@ -277,6 +283,46 @@ def _compare_with_prior(m) -> dict | None:
     from kesbrdf.validate.selection import choose
 
     result["kept"], result["why"] = choose(result)
+    return result
+
+
+#: The kind the dense rule keeps when the paper rule, on the dense data's own incidence
+#: line θ_i + θ_r = 90°, keeps ``kes`` (docs/models.md, "The default rule"; chosen leave
+#: one family out in benchmarks/bench_lofo.py).
+DENSE_KES_BRANCH = "kes-halfdiff"
+#: The kind it keeps when the paper rule keeps the woven-cloth prior.
+DENSE_FIBRE_BRANCH = "fibre-coord"
+#: Fewest rows per orientation on the incidence line for the dense rule to run.
+DENSE_LINE_MIN_ROWS = 8
+
+
+def _dense_rule(m) -> dict | None:
+    """The default for several incidence lines per orientation, all in the plane (the dense protocol).
+
+    The dense measurement contains the paper protocol's slice: the incidence line
+    θ_i + θ_r = 90° at ψ = 0, 45, 90, 135°.  The paper's rule
+    (:func:`kesbrdf.validate.selection.choose` on a leave-one-orientation-out comparison)
+    is run on that slice, so a fabric gets the same decision from a dense measurement as
+    from the paper protocol; the decision then picks the kind that uses every dense row:
+    the woven-cloth prior → :data:`DENSE_FIBRE_BRANCH` (``fibre-coord``: the fibre
+    coordinates pin the azimuthal lobe and the θ_d law from the extra rows), ``kes`` →
+    :data:`DENSE_KES_BRANCH`.  None when the slice is missing (then the row-based choice stands).
+    """
+    if not np.all(m.is_in_plane):
+        return None
+    line = np.abs(np.degrees(m.theta_i + m.theta_r) - 90.0) < 0.5
+    psi = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
+    for p in (0.0, 45.0, 90.0, 135.0):
+        if np.count_nonzero(line & (np.abs(psi - p) < 0.5)) < DENSE_LINE_MIN_ROWS:
+            return None
+    result = _compare_with_prior(m.subset(line))
+    if not result:
+        return None
+    paper_kept = result["kept"]
+    result["paper_kept"] = paper_kept
+    result["kept"] = DENSE_FIBRE_BRANCH if paper_kept in PRIOR_CANDIDATES else DENSE_KES_BRANCH
+    result["why"] = (f"the paper rule on the incidence line theta_i + theta_r = 90 deg kept {paper_kept}: "
+                     f"{result['why']}")
     return result
 
 
