@@ -57,6 +57,13 @@ def old_default(m):
     return fitter_class(name).fit_measurement(m)
 
 
+def default(m):
+    """``kesbrdf.fit(m)`` as it is now."""
+    from kesbrdf.fitting import fit
+
+    return fit(m)[0]
+
+
 def fitters(names=None) -> dict:
     from kesbrdf.fitting import fit
     from kesbrdf.models.base import known_kinds
@@ -69,7 +76,7 @@ def fitters(names=None) -> dict:
     if "fibre-coord" in known_kinds():
         out["fibre-coord"] = lambda m: fit(m, kind="fibre-coord")[0]
         out["kes-line"] = lambda m: fit(m, kind="kes")[0]
-        out["default"] = lambda m: fit(m)[0]
+        out["default"] = default
     return {k: v for k, v in out.items() if names is None or k in names}
 
 

@@ -99,6 +99,11 @@ SMOOTH = 0.3
 PULL = 0.1
 #: Allowed change (in ln, 1 σ) of k_d and of each family's k_s from the parametric prior.
 PULL_SCALE = 1.0
+#: Bound of every correction (ln): at most a factor e³ ≈ 20 either way from the parametric
+#: prior.  Without it a fit to a velvet whose base prior was already poor (benchmarks/bench_lofo.py,
+#: sadeghi velvet_draw2, paper protocol) drove nodes the data barely touch to e^20 and the
+#: hemispheres to NRMSE 45.
+CORRECTION_MAX = 3.0
 #: s_d: allowed size of the free θ_d law d (in ln, 1 σ).
 PULL_THETA_D = 0.7
 #: Relative floor of the data in the log residual (as fibre_physics.REL_FLOOR).
@@ -402,8 +407,10 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
             fun(theta)
         return cache["rj"][1]
 
-    res = least_squares(fun, np.zeros(P_), jac=jac, method="trf", max_nfev=max_nfev, ftol=1e-6, xtol=1e-8)
-    theta = np.clip(res.x, -30.0, 30.0)
+    lim = np.full(P_, CORRECTION_MAX)
+    res = least_squares(fun, np.zeros(P_), jac=jac, bounds=(-lim, lim), method="trf", max_nfev=max_nfev,
+                        ftol=1e-6, xtol=1e-8)
+    theta = res.x
     r, Jf = residual_and_jacobian(theta)
     n_data = y.size
     s2 = 1.0 if m.uncertainty is not None else float(np.sum(r[:n_data] ** 2)) / max(n_data - 1, 1)

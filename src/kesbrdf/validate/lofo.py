@@ -191,6 +191,9 @@ def fit_and_score(ref, fitters: dict, protocol: str = "paper", seed: int = 0, te
         chosen = (getattr(model, "diagnostics", None) or {}).get("fit_report", {}) if hasattr(model, "diagnostics") else {}
         if isinstance(chosen, dict) and chosen.get("fitter"):
             row["fitter"] = chosen["fitter"]
+            comp = chosen.get("comparison") or {}
+            if comp.get("median_all"):
+                row["evidence"] = {k: float(v) for k, v in comp["median_all"].items()}
         out[name] = row
     return out
 
