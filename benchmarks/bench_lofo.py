@@ -124,7 +124,49 @@ def run(draws: int = 3, names=None, cache_path: Path = CACHE) -> dict:
 
     grid = [{"paper": a, "dense": b} for a in cands for b in cands]
     out["fixed_kind_lofo"] = {f: {"value": v["value"]} for f, v in choose_lofo(results, fixed, grid).items()}
+    if "default" in fit_map:
+        out["dense_kes_branch_lofo"] = dense_branch_lofo(results)
     return out
+
+
+#: Allowed excess of a dense hemisphere NRMSE over the paper default's (tests/test_dense_rule.py).
+MARGIN = 0.10
+
+
+def _dense_pick(rows, branch):
+    """The dense rule with ``branch`` as its KES branch, from the evidence the default recorded."""
+    ev = rows["default"].get("evidence") or {}
+    if "fibre-coord" in ev and "interp(psi)" in ev and ev["fibre-coord"] < ev["interp(psi)"]:
+        return "fibre-coord"
+    return branch
+
+
+def dense_branch_lofo(results, branches=("kes-line", "rows")) -> dict:
+    """The dense rule's KES branch chosen leave one family out.
+
+    For each held-out family the branch (``kes-line``: ``kes`` on the paper slice;
+    ``rows``: ``kes-halfdiff``) is the one that, on the *other* families, gives the fewest
+    fabrics whose dense hemisphere NRMSE exceeds (1 + MARGIN) × the paper default's, then
+    the lowest summed dense hemisphere NRMSE.  Also reports, per branch, every fabric's
+    dense / paper ratio.
+    """
+    fams = [f for f, fabs in results.items() if fabs]
+
+    def cost(fam_list, branch):
+        bad, total = 0, 0.0
+        for f in fam_list:
+            for rows in results[f].values():
+                d = rows["dense"][_dense_pick(rows["dense"], branch)].get("hemispheres", np.inf)
+                p = rows["paper"]["default"].get("hemispheres", np.inf)
+                bad += int(d > (1 + MARGIN) * p)
+                total += d
+        return bad, total
+
+    chosen = {f: min(branches, key=lambda b: cost([g for g in fams if g != f], b)) for f in fams}
+    ratios = {b: {f"{f}/{fab}": rows["dense"][_dense_pick(rows["dense"], b)].get("hemispheres", np.nan)
+                  / rows["paper"]["default"].get("hemispheres", np.nan)
+                  for f in fams for fab, rows in results[f].items()} for b in branches}
+    return {"chosen": chosen, "cost_all": {b: cost(fams, b) for b in branches}, "dense_over_paper": ratios}
 
 
 def _merge(section: dict, path: Path = HERE / "results.json") -> None:

@@ -5,7 +5,10 @@ The CLI (``kesbrdf fit``), the viewer's upload and the demo all call :func:`fit`
 :data:`kesbrdf.models.base.AUTO_CANDIDATES` in order (docs/models.md):
 
 * the paper's protocol (one incidence line at ψ = 0, 45, 90, 135°) → ``kes``;
-* several incidence angles per orientation → ``kes-halfdiff``;
+* several incidence angles per orientation → ``kes-halfdiff``; with ``compare`` (the
+  default) and all four orientations in the plane, the dense rule then keeps
+  ``fibre-coord`` when it predicts a held-out orientation better than interpolation over
+  ψ, else ``kes`` on the paper slice (:func:`_dense_rule`, docs/models.md);
 * general (out-of-plane) geometries → ``scattered`` (a ``kes`` model fitted by least
   squares, with its sample-frame warp recorded).
 
@@ -192,7 +195,7 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
 
     >>> from kesbrdf.measure.gonio import measure
     >>> from kesbrdf.references.ward import AnisotropicWard
-    >>> model, report = fit(measure(AnisotropicWard(0.2, 0.3), protocol="dense", step_deg=10))
+    >>> model, report = fit(measure(AnisotropicWard(0.2, 0.3), protocol="dense", step_deg=10), compare=False)
     >>> report.kind, report.rows_used == report.rows_total
     ('kes-halfdiff', True)
     """
