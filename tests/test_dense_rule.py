@@ -53,7 +53,7 @@ def test_dense_rule_needs_all_four_orientations():
 @pytest.mark.slow
 def test_dense_rule_keeps_kes_on_a_microfacet_lobe():
     # Ward is no woven cloth: interpolation over ψ predicts a held-out orientation better
-    # than the fibre coordinates, and the rule keeps the paper's kind on the paper's slice
+    # than the fibre coordinates, and the rule keeps the KES branch (kes-halfdiff)
     from kesbrdf.references.ward import AnisotropicWard
 
     m = measure(AnisotropicWard(0.15, 0.3, 0.2, 0.1), protocol="dense", step_deg=15)
