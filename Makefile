@@ -4,7 +4,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 OUT ?= out/demo
-# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, DESIGN §7): Debian's libllvm19, installed by `make system`.
+# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, docs/architecture.md, "Tools it runs on"): Debian's libllvm19, installed by `make system`.
 export DRJIT_LIBLLVM_PATH ?= /usr/lib/$(shell uname -m)-linux-gnu/libLLVM-19.so
 export MPLBACKEND ?= Agg
 
@@ -36,9 +36,11 @@ demo: venv
 	$(VENV)/bin/kesbrdf demo -o $(OUT)
 
 # The suite includes the doctests of src/kesbrdf (tests/test_doctests.py) and a few
-# thousand fuzz examples per reader (tests/fuzz).
+# thousand fuzz examples per reader (tests/fuzz).  Two workers (pytest-xdist), one per
+# core; a test file stays on one worker so its module fixtures are built once.
+PYTEST_WORKERS ?= 2
 test: venv $(if $(shell command -v npm 2>/dev/null),viewer)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
 
 test-web: venv viewer

@@ -208,13 +208,16 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
         mask, why_not = fitter_class(kind).usable_rows(m)
         name, why, counts = kind, "asked for", {}
     comparison = None
-    if kind == "auto" and compare and not options and not strict and name == "scattered":
+    # the fitter says how kind="auto" checks its choice against the prior (auto_compare)
+    check = getattr(fitter_class(name), "auto_compare", None) if kind == "auto" and compare and not options \
+        and not strict else None
+    if check == "kfold":
         comparison = _kfold_with_prior(m)
         if comparison and comparison["kept"] == "fibre-prior":
             name = "fibre-prior"
             mask, why_not = fitter_class(name).usable_rows(m)
             why = f"fibre-prior beat the scattered KES fit in {comparison['folds']}-fold cross-validation on this data"
-    elif kind == "auto" and compare and not options and not strict and name == "kes":
+    elif check == "loo":
         comparison = _compare_with_prior(m)
         if comparison and comparison["kept"] in PRIOR_CANDIDATES:
             name = "fibre-prior"
@@ -232,6 +235,8 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
     if strict:
         options["fallback"] = "error"
     model = cls.fit_measurement(m, **options)
+    if hasattr(model, "remember_fit"):
+        model.remember_fit(m, name, options)
     used = int(np.count_nonzero(mask))
     unused = len(m) - used
     report = FitReport(

@@ -1,8 +1,11 @@
 """``kesbrdf demo``: the whole chain on the embedded sample, no input needed.
 
-images → values (ingest) → extended-KES model → validation → the paper's figures →
-HTML report → renders (sphere, draped garment, drape animation, colourways), each
-stage when its optional part is installed (``make demo`` installs them all).
+images → values (ingest) → model → validation → the paper's figures → HTML report →
+exports → renders (sphere, draped garment, drape animation, colourways), each stage
+when its optional part is installed (``make demo`` installs them all).  The steps are
+the pipeline's (:mod:`kesbrdf.pipeline`, docs/pipeline.md): the model is fitted ONCE,
+by the rule of ``kesbrdf fit``, saved as ``model.kes.json`` (any kind), and every later step
+reads that model; a step that cannot use it prints a one-line note and the rest runs.
 """
 
 from __future__ import annotations
@@ -80,118 +83,142 @@ class _Stages:
                                                         "total_cpu_s": round(cpu, 2)}, indent=1) + "\n")
 
 
+def _attempt(label: str, fn, notes: list, default=None):
+    """Run one consumer of the model; a failure is a one-line note, never a crash.
+
+    Every consumer (renders, exports, looks, figures, report, batch) reads the one model
+    the fit chose; one that cannot use it says so in one line and the rest still runs.
+    """
+    from kesbrdf.errors import KesbrdfError
+
+    try:
+        return fn()
+    except Exception as exc:  # noqa: BLE001 - the demo keeps going; the note says what failed
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        if not isinstance(exc, (KesbrdfError, ImportError)):
+            text = f"{type(exc).__name__}: {text}"
+        note = f"{label} skipped: {text[:300]}"
+        stderr(f"    note: {note}")
+        notes.append(note)
+        return default
+
+
 def run(args) -> int:
-    import kesbrdf
-    from kesbrdf.measure import demo_data
-    from kesbrdf.validate.diagnostics import diagnose
+    from kesbrdf import pipeline
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
-    from kesbrdf.validate.compare import compare_reference, leave_one_orientation_out, validate
+    from kesbrdf.measure import demo_data
     from kesbrdf._atomic import write_bytes, write_text
 
     out = check_output(args.output, folder=True)
     out.mkdir(parents=True, exist_ok=True)
     say = _Stages()
+    notes: list[str] = []
 
     # 1. acquire: images -> values when the image-based sample is available
     meas_path = out / "measurement.csv"
     manifest = demo_data.embedded_manifest()
     if manifest is not None:
-        from kesbrdf.measure.acquisition.ingest import ingest
-
         say(f"ingest: camera frames of {manifest.parent.name} -> calibrated reflectance")
-        result = ingest(manifest)
-        write_measurement(meas_path, result.measurement)
     else:
         say("acquire: embedded simulated measurement (virtual gonioreflectometer)")
-        write_bytes(meas_path, demo_data.embedded_measurement().read_bytes())
+    got = pipeline.ingest()
+    if got.source == "manifest":
+        write_measurement(meas_path, got.measurement)
+    else:
+        write_bytes(meas_path, got.raw)
     m = read_measurement(meas_path)
     reference = demo_data.embedded_reference()
 
-    # 2-3. interpolate + model
+    # 2-3. interpolate + model: ONE fit; every later step reads this model
     say(f"fit: {len(m)} samples, channels {', '.join(m.channels)}")
-    model, report = kesbrdf.fit(m)
+    fitted = pipeline.fit(m)
+    report = fitted.report
     stderr(f"    {report.summary()}")
     if report.comparison:
         stderr(f"    {report.comparison_summary()}")
     for w in report.warnings:
         stderr(f"    warning: {w}")
-    kes_model = model
-    if model.kind != "kes":
-        # the paper's figures, the renderer, the viewer and the exports read kes only
-        # (docs/models.md): they get the kes fit; the default is saved and judged beside it
-        model.save(out / f"model.{model.kind}.json")
-        kes_model = kesbrdf.fit(m, kind="kes")[0]
-        kes_model.diagnostics["fit_report"] = report.to_dict()
-        stderr(f"    default model saved as model.{model.kind}.json; figures, renders and exports use the kes fit "
-               "(model.kes.json), which they can read")
-    model_path = out / "model.kes.json"
-    kes_model.save(model_path)
+    # .kes.json is the model-file ending of every kind (docs/formats.md): a fixed name the
+    # docs' commands can use, whichever kind the fit chose
+    model_path = fitted.save(out / "model.kes.json")
+    stderr(f"    the model: {fitted.headline()}")
+    stderr(f"    saved as {model_path.name} (kind {fitted.kind}); the figures, report, renders, exports and "
+           "viewer all use it")
 
     # 4. validate
     say("validate: round trip, leave-one-orientation-out, reference + baselines, diagnostics")
+    validated = pipeline.validate(fitted, m, reference)
     summary = {
         "measurement": str(meas_path),
         "model": str(model_path),
-        "round_trip": validate(model, m),
-        "leave_one_orientation_out": leave_one_orientation_out(m),
-        "reference": compare_reference(m, reference) if reference is not None else None,
-        "diagnostics": diagnose(model),
+        "model_kind": fitted.kind,
+        "model_sha256": fitted.sha256,
+        "fit_report": fitted.selection(),
+        **validated.metrics(),
+        "diagnostics": validated.diagnostics,
     }
-    write_text(out / "validation.json", json.dumps(summary, indent=1) + "\n")
-    if summary["reference"]:
-        for base, cases in summary["reference"]["ratio_kes_to"].items():
-            text = ", ".join(f"{k}: {v:.2f}" for k, v in cases.items())
-            stderr(f"    RMSE ratio KES / {base}: {text}")
+    write_text(out / "validation.json", json.dumps(summary, indent=1, default=str) + "\n")
+    ratios = (summary.get("reference") or {}).get("ratio_kes_to") or {}
+    for base, cases in ratios.items():
+        text = ", ".join(f"{k}: {v:.2f}" for k, v in cases.items())
+        stderr(f"    RMSE ratio KES / {base}: {text}")
     prior_part, plan_result = {}, None
     if reference is not None:
         from kesbrdf.cli import _demo_prior
 
-        prior_part = _demo_prior.default_vs_baselines(m, reference, model, report, say)
+        prior_part = _demo_prior.default_vs_baselines(m, reference, fitted.model, report, say)
         summary["default_vs_baselines"] = {"headline": prior_part["headline"], "verdicts": prior_part["verdicts"],
                                            **prior_part["table"]}
-        write_text(out / "validation.json", json.dumps(summary, indent=1) + "\n")
+        write_text(out / "validation.json", json.dumps(summary, indent=1, default=str) + "\n")
         plan_result = _demo_prior.small_plan(reference, say)
 
-    comparisons = [] if args.quick else _comparisons(out, reference, say)
+    comparisons = [] if args.quick else _attempt("reference-vs-model renders",
+                                                 lambda: _comparisons(out, reference, say), notes, [])
     looks = None
     if not args.quick:
-        exported = _exports(out, kes_model, say)
-        looks = _looks(out, model_path, exported, say)
+        exported = _attempt("exports", lambda: _exports(out, fitted, say, notes), notes, {})
+        looks = _attempt("export looks", lambda: _looks(out, model_path, exported, say), notes)
 
     # figures + report
     if _have("matplotlib") and _have("kesbrdf.plotting.report"):
-        from kesbrdf.plotting import report as report_mod
+        from kesbrdf.pipeline import outputs
 
         say("figures + report")
-        report_mod.write_report(
-            out / "report.html",
-            kes_model,
-            measurement=m,
-            reference=reference,
+        prior_model = fitted.model if fitted.model.has_sigma else prior_part.get("prior_model")
+        inputs = outputs.report_inputs(
+            fitted, m, validated, reference,
             metrics=summary,
-            diagnostics=summary["diagnostics"],
             title="kesbrdf demo: virtual black satin",
             figure_dir=out / "figures",
             comparisons=comparisons,
             plan=plan_result,
             baselines=summary.get("default_vs_baselines"),
-            prior_model=model if model.kind == "fibre-prior" else prior_part.get("prior_model"),
+            prior_model=prior_model,
             looks=looks,
+            notes=list(notes),
         )
+        _attempt("figures + report", lambda: outputs.report(inputs, out / "report.html"), notes)
     else:
         say("figures + report skipped (install kesbrdf[plot])")
 
     if not args.quick:
-        _renders(out, model_path, say)
+        _attempt("renders", lambda: _renders(out, model_path, say), notes)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
     if not args.quick and _have("distributed") and _have("kesbrdf.batch.demo"):
         from kesbrdf.batch.demo import run_demo_batch
 
         say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster")
-        run_demo_batch(out / "batch", quick=args.quick, progress=say)
+        _attempt("batch", lambda: run_demo_batch(out / "batch", quick=args.quick, progress=say), notes)
     say.summary(out)
+    write_text(out / "demo_notes.json", json.dumps({"model": str(model_path), "model_kind": fitted.kind,
+                                                     "model_sha256": fitted.sha256, "notes": notes}, indent=1) + "\n")
+    if notes:
+        stderr(f"{len(notes)} step(s) could not use the {fitted.kind} model (demo_notes.json):")
+        for n in notes:
+            stderr(f"  {n}")
     stderr(f"demo outputs in {out}/")
+    stderr(f"the model: {fitted.headline()}")
     stderr(f"open the interactive viewer on this model:  kesbrdf view {model_path}")
     return 0
 
@@ -204,32 +231,30 @@ def run(args) -> int:
 DEMO_FIT_GRID = ((6, 12), (10, 20))
 
 
-def _exports(out: Path, model, say) -> dict:
+def _exports(out: Path, fitted, say, notes: list) -> dict:
     """Every export format into out/exports/<format>/ (docs/exports.md), with where it opens.
 
-    Returns {format: main file} of the formats written."""
-    import inspect
-
+    The analytic fits (glTF, glb, MaterialX, USD) are computed once for the model and
+    kept beside the outputs (out/exports/analytic-fits/), so the formats share them and
+    a second run reuses them.  Returns {format: main file} of the formats written."""
     from kesbrdf._atomic import write_text
-    from kesbrdf.errors import KesbrdfError
-    from kesbrdf.export import export, format_module, format_names
+    from kesbrdf.pipeline import outputs
 
-    summary = {}
-    for fmt in format_names():
-        try:
-            module = format_module(fmt)
-            ext = (getattr(module, "EXTENSIONS", ()) or ("",))[0]
-            opts = {"fit_grid": DEMO_FIT_GRID} if "fit_grid" in inspect.signature(module.export).parameters else {}
-            result = export(model, fmt, out / "exports" / fmt / f"fabric{ext}", **opts)
-        except (ImportError, KesbrdfError) as exc:
-            say(f"export {fmt} skipped ({exc})")
-            continue
-        summary[fmt] = result.to_json()
-        size = result.size / 2**20
-        say(f"export {fmt}: {result.paths[0]} ({size:.1f} MiB); open with: {result.open_with}")
-    if summary:
+    def progress(fmt):
+        say(f"export {fmt}")
+
+    got = outputs.export(fitted, out / "exports", stem="fabric", options={"*": {"fit_grid": DEMO_FIT_GRID}},
+                         fit_cache_dir=out / "exports" / "analytic-fits", progress=progress)
+    for fmt, result in got.results.items():
+        stderr(f"    {fmt}: {result.paths[0]} ({result.size / 2**20:.1f} MiB); open with: {result.open_with}")
+    for fmt, reason in got.failed.items():
+        note = f"export {fmt} skipped: {reason}"
+        stderr(f"    note: {note}")
+        notes.append(note)
+    if got.results:
+        summary = {fmt: r.to_json() for fmt, r in got.results.items()}
         write_text(out / "exports" / "exports.json", json.dumps(summary, indent=1) + "\n")
-    return {fmt: Path(s["paths"][0]) for fmt, s in summary.items()}
+    return got.main_files()
 
 
 #: The exports whose look the demo measures, each in the renderer that reads it

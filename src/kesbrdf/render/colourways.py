@@ -1,4 +1,4 @@
-"""A contact sheet of one garment in several colourways (DESIGN §5).
+"""A contact sheet of one garment in several colourways (docs/method.md, "Colour").
 
 Every tile uses the same model, scene, light and camera; only ``base_color`` (the
 Lambertian albedo of the dyed body) changes, so the measured lobe, which carries the
@@ -138,7 +138,7 @@ def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation")
     import drjit as dr
     import mitsuba as mi
 
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.render.bsdf import model_rgb
 
     _, measured = model_rgb(load(model_path), model_path)

@@ -19,7 +19,7 @@ __all__ = ["run_demo", "DEMO_COLOUR"]
 #: Body colour of the demo stills: None = the measured body.  The embedded fabric is a
 #: black satin; a 0.45 red body (the former value) is as bright as its 0.19 1/sr sheen
 #: and rendered it pink and matte (docs/rendering.md, "Satin findings").  Dyed
-#: versions ("arbitrarily coloured satin", DESIGN §5) are the colourway sheet's job.
+#: versions ("arbitrarily coloured satin", docs/method.md, "Colour") are the colourway sheet's job.
 DEMO_COLOUR = None
 
 

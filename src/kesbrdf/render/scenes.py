@@ -186,36 +186,27 @@ def _guess_up_axis(first, last) -> str:
 
 
 # -- pieces of scene dicts ----------------------------------------------------------
-def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
+def bsdf_dict(model_path, opts: RenderOptions, model=None) -> dict:
     """The BSDF entry for a model file and the colour options.
 
-    The plugin follows the model's kind (:data:`kesbrdf.render.bsdf.PLUGINS`): ``kesbrdf``
-    for ``kes`` (with ``opts.mapping``), ``kesbrdf_halfdiff`` for ``kes-halfdiff``,
-    ``kesbrdf_prior`` for ``fibre-prior``.  ``kind`` saves reading the file again when the
-    caller knows it.
+    The model says which plugin draws it and which options that plugin takes
+    (``model.render_plugin``, :mod:`kesbrdf.models.base`): ``kesbrdf`` (the (φ, γ) table,
+    with ``opts.mapping``) unless the kind has its own.  ``model`` saves reading the file
+    again when the caller has it.
     """
-    from kesbrdf.render.bsdf import PLUGINS
+    if model is None or isinstance(model, str):
+        from kesbrdf.io.model_file import load_model
 
-    if kind is None:
-        from kesbrdf.models.kes import load
-
-        kind = getattr(load(Path(model_path)), "kind", "kes")
-    if kind not in PLUGINS:
-        raise KesbrdfError(f"the renderer draws models of kind {', '.join(map(repr, PLUGINS))}, got {kind!r}")
+        model = load_model(Path(model_path))
+    plugin, props = model.render_plugin(
+        mapping=None if opts.mapping == "deviation" else opts.mapping, extrapolation=opts.extrapolation)
     d = {
-        "type": PLUGINS[kind],
+        "type": plugin,
         "filename": str(model_path),
         "two_sided": bool(opts.two_sided),
         "sampling": opts.sampling,
+        **props,
     }
-    if kind == "kes":
-        d["mapping"] = opts.mapping
-    elif opts.mapping != "deviation":  # never ignore an option silently
-        raise KesbrdfError(f"mapping {opts.mapping!r} applies to kes models only; a {kind} model has its own "
-                           "parametrisation (drop --mapping)")
-    if opts.extrapolation is not None and (kind != "fibre-prior" or opts.extrapolation != "hold"):
-        # the plugins' default is the model's own
-        d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
         d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
     if opts.lobe_tint is not None:
@@ -379,8 +370,8 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
     if cloth_bsdf is None:
         from kesbrdf.render.bsdf import check_model
 
-        kind = getattr(check_model(model_path, opts.mapping), "kind", "kes")
-    bsdf = cloth_bsdf if cloth_bsdf is not None else bsdf_dict(model_path, opts, kind)
+        cloth_bsdf = bsdf_dict(model_path, opts, check_model(model_path, opts.mapping))
+    bsdf = cloth_bsdf
     if isinstance(drape, (str, Path)):
         drape = read_drape(drape)
     shapes: dict = {}
