@@ -79,7 +79,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError, ModelError
-from kesbrdf.models.base import register
+from kesbrdf.models.base import ReflectanceModel, register
 from kesbrdf.models.fibre_physics import FibrePrior, fit_prior
 from kesbrdf.models.fibre_prior import (ENERGY_BOUND, FibrePriorModel, bound_energy, fit_kes_candidate, fit_residual,
                                         measured_support)
@@ -432,6 +432,15 @@ class FibreCoordModel(FibrePriorModel):
     mappings = ("deviation",)
     prior_class = CoordPrior
     fit_options = ("residual", "smooth", "pull")
+
+    def describe(self) -> str:
+        return (f"fibre-coord (fibre-coordinate corrections of the {self.prior.base.report.get('chosen') or 'woven-cloth'} "
+                f"prior{' x KES residual' if self.residual is not None else ''}), channels {', '.join(self.channels)}")
+
+    def render_plugin(self, mapping=None, extrapolation=None):
+        """The table plugin on :meth:`table_view` (the base class's): no Mitsuba port of
+        (C1) yet, and the ``kesbrdf_prior`` plugin would read only the base prior."""
+        return ReflectanceModel.render_plugin(self, mapping, extrapolation)
 
     @classmethod
     def fit_measurement(cls, measurement, **options):
