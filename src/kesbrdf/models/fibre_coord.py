@@ -27,39 +27,41 @@ The model
 ---------
 .. math::
 
-    f_r = k_d + \Phi_0(\theta_d)\, e^{d(\theta_d)} \sum_{k\in\{\text{warp},\text{weft}\}}
-          k_{s,k}\; e^{p_k(u^*_k)}\; e^{n_k(\phi_k)}\; G_k             \qquad (C1)
+    f_r = k_d e^{\delta_0} + e^{d(\theta_d)} \sum_{k\in\{\text{warp},\text{weft}\}}
+          e^{\delta_k}\, F_k(\omega_i, \omega_r)\; e^{p_k(u^*_k)}\; e^{n_k(\phi_k)}      \qquad (C1)
 
-k_d, k_{s,k} per channel; p_k (log tilt density), n_k (log azimuthal lobe) and d (log
-θ_d law) are **piecewise linear** in their coordinate, on fixed nodes
-(:data:`U_NODES_DEG`, :data:`PHI_NODES_DEG`, :data:`TD_NODES_DEG`); Φ₀ is Fresnel
-(η = 1.5) normalised at θ_d = 45° (:func:`kesbrdf.models.fibre_physics.fresnel_dielectric`).
-d is free only when the data span several θ_d (the dense protocol); the paper protocol
-has θ_d = 45° everywhere and d = 0.
+F_k is family k's part of the woven-cloth prior fitted first
+(:func:`kesbrdf.models.fibre_physics.fit_prior`: every filament/staple variant, lowest BIC;
+:func:`family_parts`), so the corrections start from a physical lobe with the cone in it.
+p_k (tilt), n_k (azimuth) and d (θ_d law) are **piecewise-linear log corrections** on fixed
+nodes (:data:`U_NODES_DEG`, :data:`PHI_NODES_DEG`, :data:`TD_NODES_DEG`), δ per-channel
+scale corrections; every one is bounded at ±:data:`CORRECTION_MAX`.  d is free only when
+the data span several θ_d (the dense protocol); the paper protocol has θ_d = 45°
+everywhere and d = 0.
 
 Every factor depends on (ω_i, ω_r) through h, |ω_i + ω_r|, ω_i·h, the symmetric Seeliger
-law and the unsigned φ: **reciprocal** by construction.
+law and the unsigned φ (F_k is reciprocal, docs/prior.md): **reciprocal** by construction.
 
 What the in-plane samples pin
 -----------------------------
-At ψ = 0 the warp's samples scan p_warp(u*) at φ = 0 for u* over ±γ_max/2, and the
-weft's sit at u* = 0 with φ = θ_i + θ_r (90° on the paper's line, 0–170° in the dense
-grid: n_weft is scanned there); ψ = 90° swaps the roles, the biases mix them.  The fit
-(:func:`fit_coord`) is a regularised (MAP) least squares on log values:
+At ψ = 0 the warp's samples scan u* over ±γ_max/2 at φ = 0, and the weft's sit at u* = 0
+with φ = θ_i + θ_r (90° on the paper's line, 0–170° in the dense grid: n_weft is scanned
+there); ψ = 90° swaps the roles, the biases mix them.  The fit (:func:`fit_coord`) is a
+regularised (MAP) least squares on log values:
 
 .. math::
 
-    \min_\theta \sum_n r_n^2 + \sum_k \Bigl\|\tfrac{D_2 p_k}{s_2}\Bigr\|^2
-      + \Bigl\|\tfrac{D_2 n_k}{s_2}\Bigr\|^2 + \Bigl\|\tfrac{p_k - p_k^0}{s_0}\Bigr\|^2
-      + \Bigl\|\tfrac{n_k - n_k^0}{s_0}\Bigr\|^2 + \Bigl\|\tfrac{D_2 d}{s_2}\Bigr\|^2
-      + \Bigl\|\tfrac{d}{s_d}\Bigr\|^2
+    \min_\theta \sum_n r_n^2 + \sum_{g\in\{p_k, n_k, d\}} \Bigl\|\tfrac{D_2 g}{s_2}\Bigr\|^2
+      + \sum_{k} \Bigl\|\tfrac{p_k}{s_0}\Bigr\|^2 + \Bigl\|\tfrac{n_k}{s_0}\Bigr\|^2
+      + \Bigl\|\tfrac{d}{s_d}\Bigr\|^2 + \Bigl\|\tfrac{\delta}{s_\delta}\Bigr\|^2
 
 r_n the log residual of :func:`kesbrdf.models.fibre_physics.fit_prior` (σ-weighted when
-the measurement has uncertainties), D₂ second differences over the nodes, p⁰, n⁰ the
-parametric tilt profile and lobe of the two-filament prior fitted first (its start).
-Where samples pin a node the data win (non-parametric); where none do, the node follows
-the parametric shape smoothly.  The Gaussian prior makes the posterior covariance
-(JᵀJ + R)⁻¹ the σ of every prediction (:attr:`CoordPrior.cov`, read by
+the measurement has uncertainties), D₂ second differences over the nodes, s₂ =
+:data:`SMOOTH`, s₀ = :data:`PULL` (toward no correction: the parametric prior), s_d =
+:data:`PULL_THETA_D`, s_δ = :data:`PULL_SCALE`.  Where samples pin a node the data win
+(non-parametric); where none do, the node stays smooth and near the physical prior.  The
+Gaussian prior makes the posterior covariance s²(JᵀJ + RᵀR)⁻¹ the fit term of every
+prediction's σ (:attr:`CoordPrior.cov`, read by
 :func:`kesbrdf.models.fibre_prior.predict_with_uncertainty`).
 
 On top, as in ``fibre-prior``, an optional KES-interpolated residual ratio (the in-plane
