@@ -112,6 +112,7 @@ KIND_MODULES: dict[str, str] = {
     "kes": "kesbrdf.models.kes",
     "kes-halfdiff": "kesbrdf.models.halfdiff",
     "fibre-prior": "kesbrdf.models.fibre_prior",
+    "fibre-coord": "kesbrdf.models.fibre_coord",
 }
 
 #: Where each fitter lives: every kind, plus fitting methods that produce an existing

@@ -55,7 +55,7 @@ from kesbrdf.models.table import lookup
 from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
 from kesbrdf.optics import fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
+__all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
@@ -92,6 +92,9 @@ class FibrePriorModel(ReflectanceModel):
 
     kind = "fibre-prior"
     mappings = ("deviation",)
+    #: The class of :attr:`prior` read back by :meth:`from_payload` (a subclass kind with
+    #: another prior, e.g. ``fibre-coord``, names its own).
+    prior_class = FibrePrior
     fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
 
     def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
@@ -221,7 +224,7 @@ class FibrePriorModel(ReflectanceModel):
     @classmethod
     def from_payload(cls, fields, arrays, shared, source=None):
         try:
-            prior = FibrePrior.from_dict(fields["prior"])
+            prior = cls.prior_class.from_dict(fields["prior"])
             residual = None
             if fields.get("has_residual") and fields["residual"].get("mode") == "halfdiff":
                 table = np.asarray(arrays["residual_table"], float)
@@ -480,6 +483,12 @@ def _fit_residual(prior: FibrePrior, m: Measurement):
     if _incidence_lines(rm) > 1:
         return _halfdiff_table(rm)
     return ratio_table(rm)
+
+
+#: Public names of the fitting steps, for kinds built on this one (``fibre-coord``).
+fit_residual = _fit_residual
+bound_energy = _bound_energy
+fit_kes_candidate = _fit_kes_candidate
 
 
 #: Largest σ of ln f reported (a factor e³ ≈ 20): beyond it the number means "unknown".
