@@ -122,8 +122,7 @@ def _view(model_path: Path, monkeypatch) -> dict:
         return srv
 
     monkeypatch.setattr(server_module, "make_server", make_server)
-    rc = main(["view", str(model_path), "--port", "0", "--no-browser"])
-    assert rc == 0
+    seen["rc"] = main(["view", str(model_path), "--port", "0", "--no-browser"])
     return seen
 
 
@@ -157,11 +156,20 @@ def run_contract(model_path: Path, meas_path: Path, out: Path, capsys, monkeypat
         err = capsys.readouterr().err
         outcome[name] = _check_outcome(rc, err, outputs, f"{model_path.name}: {name}")
     seen = _view(model_path, monkeypatch)
-    assert seen["status"] == [200, 200]
-    doc = seen["model"]["model"]
-    # the viewer's shaders draw the (phi, gamma) table format: every kind arrives as one
-    assert doc["format"] == "kesbrdf-model" and {"table", "phi_grid", "gamma_grid", "body"} <= set(doc["arrays"])
-    outcome["view"] = "ok"
+    err = capsys.readouterr().err
+    if seen["rc"] != 0:  # refused before serving: exit 2 and one line
+        outcome["view"] = _check_outcome(seen["rc"], err, [], f"{model_path.name}: view")
+        return outcome
+    assert seen["status"][0] == 200 and seen["status"][1] in (200, 422), seen["status"]
+    if seen["status"][1] == 200:
+        doc = seen["model"]["model"]
+        # the viewer's shaders draw the (phi, gamma) table format: every kind arrives as one
+        assert doc["format"] == "kesbrdf-model" and {"table", "phi_grid", "gamma_grid", "body"} <= set(doc["arrays"])
+        outcome["view"] = "ok"
+    else:  # the model cannot be drawn: one line, and the server goes on serving
+        message = seen["model"]["error"]
+        assert message and "\n" not in message
+        outcome["view"] = message
     capsys.readouterr()
     return outcome
 
@@ -248,6 +256,39 @@ def test_a_new_kind_is_covered_without_other_edits(toy_kind, tmp_path, capsys, m
     model_path, meas_path = fit_kind(toy_kind, tmp_path)
     outcome = run_contract(model_path, meas_path, tmp_path / "out", capsys, monkeypatch)
     assert outcome == dict.fromkeys(outcome, "ok"), {k: v for k, v in outcome.items() if v != "ok"}
+
+
+class NoTableModel(ToyModel):
+    """A toy kind that cannot be tabulated: the views that need a (φ, γ) table say so in one
+    line, and everything else still works."""
+
+    kind: ClassVar[str] = "toy-no-table"
+
+    def table_view(self, n_phi=None, n_gamma=None):
+        from kesbrdf.errors import ModelError
+
+        raise ModelError(f"a {self.kind!r} model has no (phi, gamma) table view (a test kind)")
+
+
+def test_a_view_that_cannot_be_drawn_is_one_line_and_the_rest_runs(tmp_path, capsys, monkeypatch):
+    saved = [dict(d) for d in (base.KIND_MODULES, base.FIT_MODULES, base._REGISTRY, base._FITTERS)]
+    try:
+        base.register(NoTableModel)
+        model_path, meas_path = fit_kind(NoTableModel.kind, tmp_path)
+        outcome = run_contract(model_path, meas_path, tmp_path / "out", capsys, monkeypatch)
+    finally:
+        for d, old in zip((base.KIND_MODULES, base.FIT_MODULES, base._REGISTRY, base._FITTERS), saved):
+            d.clear()
+            d.update(old)
+    needs_table = {"plot 5", "render", "export brdf-explorer", "export mitsuba-scene", "view"}
+    refused = {k for k, v in outcome.items() if v != "ok"}
+    assert refused == needs_table, outcome
+    for name in needs_table - {"view"}:
+        assert "has no (phi, gamma) table view" in outcome[name], (name, outcome[name])
+    assert "has no (phi, gamma) table view" in outcome["view"]
+    # the report says so for its table summary and figure 5, and draws everything else
+    html = (tmp_path / "out" / "r.html").read_text()
+    assert "has no (phi, gamma) table view" in html and "Figure 5 not drawn" in html
 
 
 #: The tabulated view reproduces the model at the table's nodes on the paper's line

@@ -159,6 +159,8 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
     # a scene of the (φ, γ) table plugin, which every kind's table view feeds; a kind
     # with its own plugin gets the measured scene only (as before: one scene per file)
     table_plugin = plugin == "kesbrdf"
+    if table_plugin:
+        model.table_view()  # a kind that cannot be tabulated says so before anything is written
     import inspect
 
     from kesbrdf.export import rgl_bsdf

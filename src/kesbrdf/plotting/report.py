@@ -29,7 +29,7 @@ import numpy as np
 
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, ModelError
 from kesbrdf.plotting.save import jsonable, describe, figure_bytes, provenance, save_figure
 
 __all__ = ["REPORT_FIGURES", "ReportInputs", "build_report", "write_report", "collect"]
@@ -245,15 +245,21 @@ def _render(v, path: tuple = (), depth: int = 0) -> str:
 def _model_summary(model) -> dict:
     if model is None:
         return {}
-    table = model.table_view()  # the (φ, γ) table, or the tabulated view of a kind without one
+    try:
+        table = model.table_view()  # the (φ, γ) table, or the tabulated view of a kind without one
+    except ModelError as exc:  # a kind that cannot be tabulated: say so, the rest still runs
+        table, no_table = None, str(exc)
     out = {
         "kind": model.kind,
         "model": model.describe(),
         "channels": ", ".join(model.channels),
         "orientations": model.parameters.get("orientations"),
-        "(φ, γ) table shape": " × ".join(str(n) for n in np.shape(table.table))
-        + ("" if model.has_table else " (tabulated through evaluate)"),
+        "(φ, γ) table shape": (" × ".join(str(n) for n in np.shape(table.table))
+                               + ("" if model.has_table else " (tabulated through evaluate)"))
+        if table is not None else f"none: {no_table}",
     }
+    if table is None:
+        return {**out, "input": (model.input_info or {}).get("name"), "sample": (model.input_info or {}).get("sample")}
     if model.has_table:
         out["table (n_phi × n_gamma)"] = f"{len(table.phi_grid)} × {len(table.gamma_grid)}"
         out["γ_max (°)"] = round(math.degrees(float(np.max(table.gamma_grid))), 6)

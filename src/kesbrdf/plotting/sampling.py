@@ -233,8 +233,14 @@ def require_input(obj, what: str, figure: str):
 
 def curve_gamma_max(model) -> float:
     """Largest |γ| of a model curve: the model's table's (its tabulated view for kinds
-    without one), at most :data:`GAMMA_LIMIT_DEG`."""
-    return float(min(np.max(model.table_view().gamma_grid), np.radians(GAMMA_LIMIT_DEG)))
+    without one), at most :data:`GAMMA_LIMIT_DEG` (that limit for a kind with no view)."""
+    from kesbrdf.errors import ModelError
+
+    try:
+        g_max = float(np.max(model.table_view().gamma_grid))
+    except ModelError:  # a kind that cannot be tabulated: its curves still evaluate
+        g_max = np.inf
+    return float(min(g_max, np.radians(GAMMA_LIMIT_DEG)))
 
 
 def channels_of(model):

@@ -134,7 +134,9 @@ def check_model(path, mapping: str = "deviation"):
     model = load(path)
     if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}the renderer needs a model with 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
-    model.render_plugin(mapping=None if mapping == "deviation" else mapping)
+    plugin, _ = model.render_plugin(mapping=None if mapping == "deviation" else mapping)
+    if plugin == "kesbrdf":  # the table plugin: the (φ, γ) view must exist before Mitsuba asks
+        model_rgb(model, path)
     return model
 
 
