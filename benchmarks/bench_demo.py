@@ -46,7 +46,6 @@ def showcase_per_frame(frames: int = SHOWCASE_FRAMES) -> dict:
     from dataclasses import replace
 
     from kesbrdf.cloth.drape import simulate_drape
-    from kesbrdf.render import demo as render_demo
     from kesbrdf.render import scenes
     from kesbrdf.render.animation import _FrameUpdater
     from kesbrdf.render.showcase import SHOWCASE, clip_frames
@@ -64,7 +63,7 @@ def showcase_per_frame(frames: int = SHOWCASE_FRAMES) -> dict:
         simulate_drape("garment", tmp / "drape", spec.sim_frames, **spec.drape_kwargs())
         sim_wall, sim_cpu = time.perf_counter() - w0, time.process_time() - c0
         drape = scenes.read_drape(tmp / "drape")
-        opts = render_demo._studio(spec.spp, resolution=tuple(spec.size), max_depth=3)
+        opts = scenes.studio_options(spec.spp, resolution=tuple(spec.size), max_depth=3)  # as run_showcase
         picks = clip_frames(replace(spec, frames=frames + 1))
         sc = scenes.load_scene(model_path, "garment", opts, drape=drape, frame=picks[0])
         scenes.render_scene(sc, opts)  # compile
