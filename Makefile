@@ -4,11 +4,11 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 OUT ?= out/demo
-# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, DESIGN §7): Debian's libllvm19, installed by `make system`.
+# Dr.Jit needs LLVM >= 17 (LLVM 15/16 crash, docs/architecture.md, "Tools it runs on"): Debian's libllvm19, installed by `make system`.
 export DRJIT_LIBLLVM_PATH ?= /usr/lib/$(shell uname -m)-linux-gnu/libLLVM-19.so
 export MPLBACKEND ?= Agg
 
-.PHONY: all demo test test-py test-web bench fuzz system venv viewer clean
+.PHONY: all demo showcase test test-py test-web bench fuzz system venv viewer clean
 
 all: test
 
@@ -35,10 +35,19 @@ viewer: viewer/node_modules/.installed
 demo: venv
 	$(VENV)/bin/kesbrdf demo -o $(OUT)
 
+# The full clip: the satin skirt on the mannequin turning 180°, 4.5 s at 24 fps, native
+# 1280x720, denoised (MP4 + GIF + a strip of four frames) in out/showcase; resumable.
+# Uses the demo's model when `make demo` ran, else fits the embedded sample itself.
+SHOWCASE_OUT ?= out/showcase
+showcase: venv
+	$(VENV)/bin/kesbrdf showcase $(if $(wildcard $(OUT)/model.kes.json),$(OUT)/model.kes.json) -o $(SHOWCASE_OUT)
+
 # The suite includes the doctests of src/kesbrdf (tests/test_doctests.py) and a few
-# thousand fuzz examples per reader (tests/fuzz).
+# thousand fuzz examples per reader (tests/fuzz).  Two workers (pytest-xdist), one per
+# core; a test file stays on one worker so its module fixtures are built once.
+PYTEST_WORKERS ?= 2
 test: venv $(if $(shell command -v npm 2>/dev/null),viewer)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
 
 test-web: venv viewer

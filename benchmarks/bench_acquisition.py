@@ -71,7 +71,7 @@ def compare_with_reference(measurement, brdf) -> dict:
 
     Models: ``kes4`` (default), ``kes3`` (the paper's eq. 1–2), and the baselines
     ``nearest`` and ``linear`` (interpolation over φ), each with the deviation and
-    half-vector mappings; the log fallback of DESIGN §3 where K(φ) ≤ 0.
+    half-vector mappings; the log fallback where K(φ) ≤ 0 (docs/method.md, "Interpolation over orientation").
     """
     from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian

@@ -18,7 +18,7 @@ def run() -> dict:
     from kesbrdf.measure.gonio import measure
     from kesbrdf.models.kes import fit
     from kesbrdf.plotting.figures import FIGURES, make_figure
-    from kesbrdf.plotting.report import write_report
+    from kesbrdf.plotting.report import ReportInputs, write_report
     from kesbrdf.plotting.save import figure_bytes
     from kesbrdf.references.ward import AnisotropicWard
 
@@ -34,7 +34,7 @@ def run() -> dict:
         out[f"figure_{name}_png_s"] = best_of(build_and_save)
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "report.html"
-        out["report_s"] = best_of(lambda: write_report(path, model, m, ref), repeats=1)
+        out["report_s"] = best_of(lambda: write_report(path, ReportInputs(model, m, ref)), repeats=1)
         out["report_bytes"] = path.stat().st_size
     return out
 

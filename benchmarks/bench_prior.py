@@ -95,7 +95,7 @@ def _through_file(model):
     """``model`` saved to a model file and read back (the σ a user's file gives)."""
     import tempfile
 
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     with tempfile.TemporaryDirectory() as tmp:
         model.save(Path(tmp) / "m.kes.json")

@@ -1,6 +1,6 @@
 """Real data: KES lobe + body vs baselines on the CUReT fabrics, k-fold held out.
 
-DESIGN §4 (last paragraph) reports that on real scattered gonio data the pure KES lobe
+docs/method.md ("The body term") reports that on real scattered gonio data the pure KES lobe
 did no better than an isotropic curve, while the lobe plus one diffuse term beat both
 the isotropic curve and an anisotropic Ward on every fabric.  This measures it.
 
@@ -23,7 +23,7 @@ Methods (one set of hyper-parameters, the defaults of kesbrdf.models.scattered, 
 ``python benchmarks/bench_real_data.py --sensitivity`` also refits (a), (b), (d) with both
 smoothness weights ×1/3 and ×3 to show whether the conclusions hang on them.
 
-Data: /work/shared/data/curet when present (read with kesbrdf.io.curet.read_curet),
+Data: the full CUReT files in $KESBRDF_CURET_DIR when set (read with kesbrdf.io.curet.read_curet),
 else the identical committed extract tests/data/curet_fabrics.csv.
 Run: ``PYTHONPATH=src python benchmarks/bench_real_data.py`` (about 5-10 min on 2 cores).
 """
@@ -31,6 +31,7 @@ Run: ``PYTHONPATH=src python benchmarks/bench_real_data.py`` (about 5-10 min on 
 from __future__ import annotations
 
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -47,7 +48,7 @@ from kesbrdf.measure.measurement import Measurement  # noqa: E402
 from kesbrdf.models.scattered import evaluate_sample_frame, fit_scattered, fit_ward  # noqa: E402
 from kesbrdf.validate.compare import metrics  # noqa: E402
 
-SHARED = Path("/work/shared/data/curet")
+SHARED = Path(os.environ["KESBRDF_CURET_DIR"]) if os.environ.get("KESBRDF_CURET_DIR") else None
 EXTRACT = HERE.parent / "tests" / "data" / "curet_fabrics.csv"
 SEED = 20261122
 N_FOLDS = 5
@@ -67,7 +68,7 @@ METHODS = {
 def load_fabrics() -> dict:
     """{sample number: Measurement} of every CUReT fabric (one channel)."""
     out = {}
-    if SHARED.exists():
+    if SHARED is not None and SHARED.exists():
         for s in FABRICS:
             out[s] = read_curet(SHARED / "table.txt", SHARED / "abrdf.dat", s)
         return out
@@ -138,7 +139,9 @@ def run(fabrics=None, folds: int = N_FOLDS) -> dict:
     return {
         "folds": folds,
         "seed": SEED,
-        "source": str(SHARED if SHARED.exists() else EXTRACT),
+        # named, not as a path: the page of results is read on other machines
+        "source": ("the full CUReT files ($KESBRDF_CURET_DIR)" if SHARED is not None and SHARED.exists()
+                   else "tests/data/curet_fabrics.csv"),
         "fabrics": table,
         "wins": summary,
         "mean_log_rmse": means,

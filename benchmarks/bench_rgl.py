@@ -1,6 +1,6 @@
 """Real data: KES models of the RGL-EPFL acrylic felts against the measured felts.
 
-For each felt (all three from ``/work/shared/data/rgl`` when present, else the one
+For each felt (all three from ``$KESBRDF_RGL_DIR`` when set, else the one
 committed in ``tests/data/rgl``):
 
 * ``<felt>_kes_<mapping>_<light>_{rmse,log_rmse,nrmse}``: the paper-protocol model
@@ -21,12 +21,13 @@ rmse in 1/sr; log_rmse and nrmse as :func:`kesbrdf.validate.compare.metrics`.
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-SHARED = Path("/work/shared/data/rgl")
+SHARED = Path(os.environ["KESBRDF_RGL_DIR"]) if os.environ.get("KESBRDF_RGL_DIR") else None
 COMMITTED = HERE.parent / "tests" / "data" / "rgl"
 FELTS = ("white", "pink", "purple")
 HELD_OUT_DEG = (22.5, 60.0, 112.5)
@@ -36,7 +37,7 @@ def felt_paths() -> dict:
     """Felt name -> path of its RGB tensor file (shared data first, else committed)."""
     out = {}
     for name in FELTS:
-        for folder in (SHARED, COMMITTED):
+        for folder in (f for f in (SHARED, COMMITTED) if f is not None):
             path = folder / f"acrylic_felt_{name}_rgb.bsdf"
             if path.exists():
                 out[name] = path

@@ -3,9 +3,9 @@
 For each input (``kesbrdf.io.sources.read_source`` then ``kesbrdf.fit`` with
 ``kind="auto"``, the held-out comparison included, as ``kesbrdf fit FILE`` runs it):
 
-* CUReT fabrics felt, corduroy, linen, velvet (``/work/shared/data/curet`` when present,
+* CUReT fabrics felt, corduroy, linen, velvet (``$KESBRDF_CURET_DIR`` when set,
   else rebuilt from the committed extract ``tests/data/curet_fabrics.csv``);
-* the RGL acrylic felts (shared data when present, else the committed white felt),
+* the RGL acrylic felts (``$KESBRDF_RGL_DIR`` when set, else the committed white felt),
   paper protocol, and the white felt at the dense protocol;
 * a full-size synthetic MERL ``.binary`` of an isotropic Ward + Lambert BRDF (no MERL
   material is redistributable here; the file has the real size and layout).
@@ -19,6 +19,7 @@ Run: ``PYTHONPATH=src python benchmarks/bench_sources.py`` (about 3-5 CPU-min).
 from __future__ import annotations
 
 import json
+import os
 import sys
 import tempfile
 import time
@@ -27,7 +28,6 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))  # source_helpers: CUReT / MERL writers
 
-SHARED = Path("/work/shared/data")
 CURET_SAMPLES = ("felt", "corduroy", "linen", "velvet")
 
 
@@ -39,7 +39,7 @@ def inputs(folder: Path) -> list:
     from kesbrdf.io.curet import FABRICS
     from kesbrdf.references.ward import AnisotropicWard
 
-    curet = SHARED / "curet"
+    curet = Path(os.environ.get("KESBRDF_CURET_DIR") or folder / "curet")
     if not (curet / "abrdf.dat").is_file():
         curet = folder / "curet"
         curet.mkdir()

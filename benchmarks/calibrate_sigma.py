@@ -38,7 +38,7 @@ from bench_prior import references  # noqa: E402
 
 from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
 from kesbrdf.measure.gonio import measure  # noqa: E402
-from kesbrdf.models.kes import load  # noqa: E402
+from kesbrdf.io.model_file import load_model as load  # noqa: E402
 from kesbrdf.models.fibre_prior import OFF_SUPPORT_SCALE, FibrePriorModel, _variance_terms, support_distance  # noqa: E402
 from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions  # noqa: E402
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install the Debian packages kesbrdf's optional parts need (idempotent).
-#   libllvm19  - Dr.Jit's LLVM backend for Mitsuba 3 (LLVM 15/16 crash, DESIGN §7)
+#   libllvm19  - Dr.Jit's LLVM backend for Mitsuba 3 (LLVM 15/16 crash, docs/architecture.md, "Tools it runs on")
 #   chromium   - headless browser for the viewer's end-to-end tests
 #   glslang-tools - glslangValidator, compiles the BRDF Explorer export's GLSL in the tests
 #   libx11-6 libxrender1 libxfixes3 libxi6 libxkbcommon0 - X client libraries bpy (Blender 4.5

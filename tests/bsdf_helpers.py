@@ -22,3 +22,8 @@ def eval_cos(bsdf, wi, wr):
     si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
     si.wi = mi.Vector3f(*wr.T)
     return np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T))).T
+
+
+def eval_fr(bsdf, wi, wr):
+    """f_r (N, 3): Mitsuba's eval with the cosine divided out."""
+    return eval_cos(bsdf, wi, wr) / wi[:, 2:3]

@@ -77,7 +77,7 @@ def test_compare_models_ranks_a_worse_model_below(satin):
 
 def test_report_has_comparison_table_uncertainty_and_planning(satin):
     import kesbrdf
-    from kesbrdf.plotting.report import build_report
+    from kesbrdf.plotting.report import ReportInputs, build_report
     from kesbrdf.models.fibre_prior import FibrePriorModel
 
     ref, m = satin
@@ -92,7 +92,7 @@ def test_report_has_comparison_table_uncertainty_and_planning(satin):
                           "paper+out-of-plane": {"n_samples": 124, "median": 0.22, "over_budget": False}}}
     base = compare_models(m, ref, {"default": model}, {"linear": kes_fit(m, interpolation="linear")}, "default")
     base["verdicts"] = verdicts(base)
-    text = build_report(model, m, ref, figures=(), dpi=30, plan=plan, baselines=base, prior_model=prior)
+    text = build_report(ReportInputs(model, m, ref, figures=(), dpi=30, plan=plan, baselines=base, prior_model=prior))
     assert "<h3>Model comparison</h3>" in text
     kept = comp["kept"]
     assert f"kept <b>{kept}</b>" in text
@@ -103,7 +103,7 @@ def test_report_has_comparison_table_uncertainty_and_planning(satin):
     assert 'id="fig-6-prior-uncertainty"' in text
     assert "Default model vs baselines" in text and base["verdicts"][0] in text.replace("&gt;", ">")
     # without the optional inputs the section keeps only what the model carries
-    bare = build_report(model, m, ref, figures=(), dpi=30)
+    bare = build_report(ReportInputs(model, m, ref, figures=(), dpi=30))
     assert 'id="fig-plan"' not in bare and 'id="fig-6-prior-uncertainty"' not in bare
 
 

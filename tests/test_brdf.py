@@ -28,7 +28,7 @@ def test_reciprocity(model, random_pairs, mapping):
 
 
 def test_paper_mapping_is_not_reciprocal(model, random_pairs):
-    # documented property of eq. 3–4 as printed (DESIGN §4): do not "fix" it silently
+    # documented property of eq. 3–4 as printed (docs/method.md, "From the table to a BRDF"): do not "fix" it silently
     wi, wr = random_pairs
     a, b = evaluate(model, wi, wr, "paper"), evaluate(model, wr, wi, "paper")
     assert np.max(np.abs(a - b) / np.abs(a)) > 0.1
@@ -61,7 +61,7 @@ def test_broadcasting(model, rng):
 
 
 def test_in_plane_mapping_conventions():
-    # ψ = 30°, γ > 0: deviation toward azimuth ψ; γ < 0: toward ψ + π (DESIGN §4)
+    # ψ = 30°, γ > 0: deviation toward azimuth ψ; γ < 0: toward ψ + π (docs/method.md, "From the table to a BRDF")
     wi, wr = in_plane_directions(np.radians(30), np.radians([20, 50]), np.radians([50, 20]))
     for mapping in ("deviation", "halfvector"):
         phi, gamma = to_phi_gamma(wi, wr, mapping)

@@ -77,7 +77,7 @@ def test_files_without_the_new_parameters_evaluate_as_before(tmp_path, random_pa
     """A model file written before the fix (no ``normalisation``/``extrapolation``) keeps
     its meaning: q/√(cos θ_i cos θ_r) with the last γ column held, as it was fitted."""
     from kesbrdf.models.mappings import to_phi_gamma
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     legacy = kesbrdf.fit(measure(make_reference("ward")), kind="kes", normalisation="sqrtcos", extrapolation="hold")[0]
     del legacy.parameters["normalisation"], legacy.parameters["extrapolation"]
@@ -109,7 +109,7 @@ def test_energy_scaled_fibre_prior_keeps_reciprocity_and_the_measured_samples(fi
 def test_fibre_prior_file_keeps_its_energy_scale_and_old_files_have_none(tmp_path, fits, random_pairs):
     """Saved and read back, the energy table gives the same f_r; a file written before it
     (no ``energy`` field) evaluates as the unscaled prior × residual it was fitted as."""
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     model = fits["sadeghi-velvet", "fibre-prior"]
     back = load(model.save(tmp_path / "v.kes.json"))

@@ -12,7 +12,7 @@ def test_spherical_round_trip(rng):
 
 
 def test_in_plane_convention():
-    # light at azimuth ψ + π, viewer at ψ (DESIGN §2)
+    # light at azimuth ψ + π, viewer at ψ (docs/method.md, "Conventions")
     wi, wr = in_plane_directions(0.0, np.radians(30), np.radians(30))
     np.testing.assert_allclose(wi, [-0.5, 0, np.cos(np.radians(30))], atol=1e-12)
     np.testing.assert_allclose(wr, [0.5, 0, np.cos(np.radians(30))], atol=1e-12)

@@ -88,7 +88,7 @@ def test_log_fallback_passes_through_and_stays_positive(rng):
 
 
 def test_kes_can_go_negative_between_orientations():
-    # warp and weft very different: the quartic dips below zero between them (DESIGN §3)
+    # warp and weft very different: the quartic dips below zero between them (docs/method.md, "Interpolation over orientation")
     K = kes.kes3(1.0, 0.1, 50.0, np.radians(np.arange(0, 91)))
     assert K.min() < 0
 

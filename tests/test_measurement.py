@@ -1,4 +1,4 @@
-"""kesbrdf.measure.measurement: the in-plane construction (DESIGN §2), shapes, views and subsets."""
+"""kesbrdf.measure.measurement: the in-plane construction (docs/method.md, "Conventions"), shapes, views and subsets."""
 
 import numpy as np
 import pytest

@@ -8,7 +8,8 @@ import pytest
 from kesbrdf.models.brdf import evaluate
 from kesbrdf.errors import KESError, MeasurementError, ModelError
 from kesbrdf.measure.gonio import measure
-from kesbrdf.models.kes import fit, load
+from kesbrdf.io.model_file import load_model as load
+from kesbrdf.models.kes import fit
 from kesbrdf.references.ward import AnisotropicWard
 
 #: Exact reproduction of inputs: only float round-off through trig and the lookup.

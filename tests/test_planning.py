@@ -16,7 +16,7 @@ from kesbrdf.references.ward import AnisotropicWard
 #: Geometry identities are exact up to float rounding of trig functions.
 GEOMETRY_TOL = 1e-12
 #: A model measured in the paper protocol and refitted from those samples is the same
-#: table (DESIGN §4 round trip), so its hemisphere error is at round-off level; the
+#: table (the round trip of docs/method.md, "From the table to a BRDF"), so its hemisphere error is at round-off level; the
 #: bound allows the γ-grid resampling of the refit (linear in q on the same nodes).
 SELF_CONSISTENCY_NRMSE = 1e-6
 

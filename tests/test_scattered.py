@@ -16,7 +16,8 @@ from kesbrdf.errors import KesbrdfError, MeasurementError
 from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import read_measurement
 from kesbrdf.measure.measurement import Measurement
-from kesbrdf.models.kes import fit, load
+from kesbrdf.io.model_file import load_model as load
+from kesbrdf.models.kes import fit
 from kesbrdf.references.ward import AnisotropicWard
 from kesbrdf.models.scattered import (
     RotatedBRDF,

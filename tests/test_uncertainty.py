@@ -13,7 +13,7 @@ from kesbrdf.errors import ModelError
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import write_measurement
-from kesbrdf.models.kes import load
+from kesbrdf.io.model_file import load_model as load
 from kesbrdf.models.fibre_prior import FibrePriorModel
 from kesbrdf.references.irawan2012 import Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
@@ -172,7 +172,7 @@ def prior_files(tmp_path_factory):
 
 
 def test_eval_uncertainty_columns(prior_files, tmp_path):
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     d, _ = prior_files
     out = tmp_path / "o.csv"
@@ -204,7 +204,7 @@ def test_eval_uncertainty_on_kes_is_a_one_line_error(prior_files, tmp_path, caps
     assert "carries no uncertainty" in err and "fibre-prior" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "o.csv").exists()
     with pytest.raises(ModelError):
-        from kesbrdf.models.kes import load
+        from kesbrdf.io.model_file import load_model as load
 
         predict_sigma(load(d / "k.kes.json"), np.array([[0, 0, 1.0]]), np.array([[0, 0, 1.0]]))
 

@@ -6,7 +6,8 @@ import { defineConfig } from 'vite';
 export default defineConfig({
   base: './',
   // `npm run dev`: forward the JSON API to a running `kesbrdf view --port 8765`
-  server: { proxy: { '/api': process.env.KESBRDF_API ?? 'http://127.0.0.1:8765' } },
+  // and serve ../src/kesbrdf/shaders/kes_brdf.glsl, the model's GLSL shared with the Python export
+  server: { proxy: { '/api': process.env.KESBRDF_API ?? 'http://127.0.0.1:8765' }, fs: { allow: ['..'] } },
   build: {
     outDir: 'dist',
     sourcemap: false,

@@ -1,7 +1,8 @@
 """kesbrdf: anisotropic fabric BRDFs from the extended KES method (Takeda et al.).
 
-Layers (DESIGN §6): io → measurement → kes → model → brdf → validation, with plotting,
-render, viewer and cli on top.  Only numpy is needed for the core.
+The paper's steps are folders: ``measure`` (acquire), ``models`` (interpolate and model)
+and ``validate``; plotting, render, viewer, export, batch and cli sit on top
+(docs/architecture.md).  Only numpy is needed for the core.
 
 ``kesbrdf.fit(measurement, kind="auto", **options) -> (model, report)`` is the one
 fitting entry point (:mod:`kesbrdf.fitting`, docs/models.md).

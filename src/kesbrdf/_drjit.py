@@ -1,4 +1,4 @@
-"""Import Mitsuba 3 / Dr.Jit with an LLVM that works (DESIGN §7).
+"""Import Mitsuba 3 / Dr.Jit with an LLVM that works (docs/architecture.md, "Tools it runs on").
 
 Dr.Jit's LLVM backend needs LLVM ≥ 17 (15 and 16 crash mid-render).  When
 ``DRJIT_LIBLLVM_PATH`` is unset (or empty) and Debian's ``libllvm19`` is installed, it is

@@ -1,4 +1,4 @@
-"""Directions in the fabric frame (x = warp, y = weft, z = normal; DESIGN §2).
+"""Directions in the fabric frame (x = warp, y = weft, z = normal; docs/method.md, "Conventions").
 
 Vectors put their components on the last axis and broadcast over leading axes.
 """
@@ -48,7 +48,7 @@ def cartesian_to_spherical(w) -> tuple[np.ndarray, np.ndarray]:
 
 
 def in_plane_directions(psi, theta_i, theta_r) -> tuple[np.ndarray, np.ndarray]:
-    """(wi, wr) of the in-plane geometry for orientation ``psi`` (DESIGN §2).
+    """(wi, wr) of the in-plane geometry for orientation ``psi`` (docs/method.md, "Conventions").
 
     The light is at azimuth ψ + π and polar angle θ_i, the viewer at azimuth ψ and
     polar angle θ_r, so γ = θ_r − θ_i > 0 puts the viewer beyond the mirror direction.

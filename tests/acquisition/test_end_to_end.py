@@ -3,7 +3,7 @@
 The error bound
 ---------------
 The extended-KES model passes through every in-plane sample it was fitted to (the
-round trip of DESIGN §4, exact to rounding), so at the measured geometries the whole
+round trip of docs/method.md, "From the table to a BRDF", exact to rounding), so at the measured geometries the whole
 chain's error is the ingest error, and that is set by the sensor noise alone: the
 photon, dark and read noise of the sample and white frames over the ROI, which
 ``acq_helpers.predicted_sigma`` computes from the sensor model without looking at the
@@ -29,7 +29,7 @@ from kesbrdf.measure.acquisition.sensor import Sensor
 Z_MAX = 4.5
 #: Mean z² over 348 values: 1 ± sqrt(2/348) = ± 0.076; [0.7, 1.35] is > 3.9 of those.
 MEAN_Z2_RANGE = (0.7, 1.35)
-#: Round trip of the model at its own input samples (DESIGN §4): rounding only.
+#: Round trip of the model at its own input samples (docs/method.md, "From the table to a BRDF"): rounding only.
 ROUND_TRIP_RTOL = 1e-9
 RIG = dict(protocol="paper", size=16, margin=2, roi_inset=1)
 N_ROI = 10 * 10
@@ -48,7 +48,7 @@ def chain(satin, tmp_path_factory):
     manifest = simulate_images(satin, tmp_path_factory.mktemp("e2e"), sensor=sensor, seed=2026, **RIG)
     result = ingest(manifest)
     # The satin's warp and weft lobes differ so much that K(φ) dips below zero at large
-    # γ (DESIGN §3): the documented log fallback is needed there.
+    # γ (docs/method.md, "Interpolation over orientation"): the documented log fallback is needed there.
     model = model_module.fit(result.measurement, fallback="log")
     return sensor, result, model
 

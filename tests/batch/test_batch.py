@@ -277,12 +277,10 @@ def test_export_step_runs_every_listed_format(library, tmp_path, monkeypatch):
     mod.parent.mkdir(parents=True)
     (mod.parent / "__init__.py").write_text("")
     mod.write_text(
-        "import json\nfrom pathlib import Path\nEXTENSIONS = ('.fake.json',)\n"
-        "class R:\n    def __init__(self, p): self.p = p\n"
-        "    def to_json(self): return {'format': 'fake', 'paths': [str(self.p)], 'agreement': {}}\n"
+        "import json\nfrom pathlib import Path\nfrom kesbrdf.export import ExportResult\nEXTENSIONS = ('.fake.json',)\n"
         "def export(model, out, **options):\n"
         "    Path(out).write_text(json.dumps({'channels': list(model.channels), 'shape': list(model.table.shape)}))\n"
-        "    return R(out)\n"
+        "    return ExportResult('fake', [out])\n"
     )
     monkeypatch.syspath_prepend(str(mod.parent.parent))
     fabrics = read_catalog(library)[:2]

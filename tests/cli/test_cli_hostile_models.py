@@ -157,7 +157,7 @@ def test_export_refuses_an_in_memory_model_no_file_could_hold(base, tmp_path, va
     """The Python API: a model built in memory with 1e308 / inf / NaN is refused like a file."""
     from kesbrdf.errors import ExportError
     from kesbrdf.export import export
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     model = load(base / "model.kes.json")
     model.table[1, 1, 0] = value

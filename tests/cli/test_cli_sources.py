@@ -16,7 +16,7 @@ from kesbrdf.models.brdf import evaluate
 from kesbrdf.cli.main import main
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.io.measurement_csv import read_measurement
-from kesbrdf.models.kes import load
+from kesbrdf.io.model_file import load_model as load
 from kesbrdf.references.rgl_tensor import RGLTensorBRDF
 from kesbrdf.references.ward import AnisotropicWard
 

@@ -7,7 +7,7 @@ read-only file system, permission denied) injected into the output folder with
 print exactly one line on stderr that names the output path and the cause in words,
 exit with 2, and leave the output folder as it was (no temporary, no half file).
 Real cases need no injection: a 300-character file name, ``-o`` below an existing
-file, and ``-o`` below missing folders (docs/decisions.md, "Missing output folders").
+file, and ``-o`` below missing folders (docs/decisions.md, "Outputs and write errors").
 """
 
 from __future__ import annotations

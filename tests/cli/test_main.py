@@ -29,7 +29,7 @@ def test_simulate_writes_paper_protocol(tmp_path):
 def test_eval_matches_library_and_inputs(tmp_path, fitted):
     from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     meas, model_path = fitted
     pairs = tmp_path / "pairs.csv"
@@ -75,7 +75,12 @@ def test_demo_quick(tmp_path):
     assert main(["demo", "-o", str(out), "--quick"]) == 0
     v = json.loads((out / "validation.json").read_text())
     assert v["round_trip"]["metrics"]["all"]["rmse"] < 1e-9
-    assert (out / "model.kes.json").exists()
+    # issue 19: one fit; the one model file is the kind the fit chose, and the report names it
+    from kesbrdf.io.model_file import load_model
+
+    assert sorted(p.name for p in out.glob("model*.json")) == ["model.kes.json"]
+    assert load_model(out / "model.kes.json").kind == v["fit_report"]["kind"] == v["model_kind"]
+    assert f"<td class=txt>{v['model_sha256']}</td>" in (out / "report.html").read_text()
     # issue 9: the default model against the baselines, one verdict per case, consistent
     # with the stored RMSEs; the report carries the comparison, uncertainty and plan
     dvb = v["default_vs_baselines"]
@@ -84,7 +89,10 @@ def test_demo_quick(tmp_path):
         wins = all(row[dvb["default"]]["rmse"] < row[b]["rmse"] for b in ("linear", "nearest"))
         assert line.startswith(case) and (line.endswith("beats linear and nearest") == wins), line
     html = (out / "report.html").read_text()
-    for anchor in ("<h3>Model comparison</h3>", 'id="fig-plan"', 'id="fig-6-prior-uncertainty"'):
+    # the prior's uncertainty map: the model's own when the fit chose the prior (issue 19:
+    # the report is about the chosen model), else beside the chosen model
+    prior_map = 'id="fig-6-uncertainty"' if load_model(out / "model.kes.json").has_sigma else 'id="fig-6-prior-uncertainty"'
+    for anchor in ("<h3>Model comparison</h3>", 'id="fig-plan"', prior_map):
         assert anchor in html
 
 
@@ -108,7 +116,7 @@ def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys)
     assert "scattered fit" in capsys.readouterr().err
     js = tmp_path / "v.json"
     assert main(["validate", str(model), str(src), "--json", str(js)]) == 0
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.models.scattered import evaluate_sample_frame
     from kesbrdf.validate.compare import metrics
 

@@ -55,7 +55,7 @@ def test_pattern_is_drafted_from_the_body():
 
 
 def test_panels_uvs_follow_the_grain_line_and_seams_pair_edges():
-    cloth = pattern.gored_skirt(8, 4, 0.12, 40.0, 0.1)
+    cloth = pattern.gored_skirt(8, 4, 0.12, 40.0, 0.1, pattern.SkirtPattern(bias_gores=()))
     n_per = 9 * 5
     uv = cloth.uv_rest.reshape(6, 9, 5, 2)
     p = cloth.positions.reshape(6, 9, 5, 3).astype(float)
@@ -134,3 +134,56 @@ def test_turn_needs_the_garment_scene():
         DrapeParameters(scene="sphere", turn_deg=30.0).validate()
     with pytest.raises(DrapeError, match="turn_duration_s"):
         DrapeParameters(scene="garment", turn_deg=30.0, turn_duration_s=0.0).validate()
+
+
+def test_bias_gore_grain_runs_at_45_degrees_and_keeps_the_orientation():
+    """The centre front is cut on the bias: its UVs are the straight grain turned by 45°
+    (so the BSDF's warp, ∂p/∂u, runs at 45° to the gore's centre line), the frame still
+    points out of the garment, and its springs put the thread stiffness on the diagonals."""
+    straight = pattern.gored_skirt(8, 4, 0.12, 40.0, 0.1, pattern.SkirtPattern(bias_gores=()))
+    cloth = pattern.gored_skirt(8, 4, 0.12, 40.0, 0.1)
+    assert cloth.bias_gores == (0,)
+    n_per = 9 * 5
+    uv0, uvb = straight.uv_rest[:n_per], cloth.uv_rest[:n_per]
+    # the bias UVs are a +45° rotation of the straight ones (same lengths, same handedness)
+    r = np.sqrt(0.5)
+    assert np.allclose(uvb, np.stack([r * (uv0[:, 0] + uv0[:, 1]), r * (uv0[:, 1] - uv0[:, 0])], -1), atol=1e-12)
+    # the other gores keep their straight grain
+    assert np.array_equal(cloth.uv_rest[n_per:], straight.uv_rest[n_per:])
+    # world direction of ∂p/∂u on the placed gore: 45° (± 8°, the panel is bent round the
+    # body and its cells are not square) from the downward centre line
+    p = cloth.positions[:n_per].astype(float)
+    f = cloth.faces[: len(cloth.faces) // 6]
+    d_uv = np.stack([uvb[f[:, 1]] - uvb[f[:, 0]], uvb[f[:, 2]] - uvb[f[:, 0]]], 1)
+    d_p = np.stack([p[f[:, 1]] - p[f[:, 0]], p[f[:, 2]] - p[f[:, 0]]], 1)
+    dpdu = np.einsum("fij,fjk->fik", np.linalg.inv(d_uv), d_p)[:, 0]  # rows: ∂p/∂u, ∂p/∂v
+    dpdu /= np.linalg.norm(dpdu, axis=1, keepdims=True)
+    down = np.array([0.0, 0.0, -1.0])
+    ang = np.degrees(np.arccos(np.clip(np.abs(dpdu @ down), 0, 1)))
+    assert np.median(ang) == pytest.approx(45.0, abs=8.0)
+    n = vertex_normals(cloth.positions, cloth.faces)[:n_per]
+    radial = p[:, :2] / np.linalg.norm(p[:, :2], axis=-1, keepdims=True)
+    assert (np.sum(n[:, :2] * radial, axis=-1) > 0.5).all()
+    # same per-particle stiffness sum of the panel's own springs (the substep): the bias
+    # springs only move stiffness from the grid axes onto the diagonals (the seams, the
+    # last springs, are taped: BIAS_SEAM_FACTOR)
+    def k_sum(c):
+        k = np.zeros(len(c.masses))
+        inner = slice(0, len(c.springs) - len(c.seams))
+        for col in (0, 1):
+            np.add.at(k, c.springs[inner, col], c.spring_ke[inner])
+        return k[:n_per]
+    assert k_sum(cloth).max() <= 1.01 * k_sum(straight).max()
+
+
+def test_scenes_and_pattern_do_not_import_each_other():
+    import ast
+    import inspect
+
+    from kesbrdf.cloth import grid
+
+    src = inspect.getsource(pattern)
+    names = {a.name if isinstance(node, ast.Import) else f"{node.module}.{a.name}"
+             for node in ast.walk(ast.parse(src)) if isinstance(node, (ast.Import, ast.ImportFrom)) for a in node.names}
+    assert not any("scenes" in n for n in names), names
+    assert "scenes" not in inspect.getsource(grid).split('"""', 2)[2]

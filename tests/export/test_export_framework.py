@@ -122,3 +122,53 @@ def test_bad_grid_option_is_a_one_line_error(tmp_path, model):
     with pytest.raises(ExportError, match="option n_phi_i: expected an integer >= 3"):
         export(model, "rgl-bsdf", tmp_path / "m.bsdf", n_phi_i=2)
     assert not (tmp_path / "m.bsdf").exists()
+
+
+def test_a_format_returning_a_dict_is_refused_in_one_line(tmp_path, model, toy):
+    """The framework's one contract: ``export()`` returns an ExportResult; a dict is refused."""
+    toy.export = lambda model, out, scale=1.0: {"paths": [str(out)], "max_rel_err": 0.0}
+    with pytest.raises(ExportError) as exc:
+        export(model, "toy", tmp_path / "m.toy")
+    text = str(exc.value)
+    assert "\n" not in text and "ExportResult" in text and "dict" in text and text.startswith("toy:")
+
+
+#: Cheap options per format option name: the analytic formats get precomputed fits on
+#: the small grid (tests/export/conftest.py), the tensor formats a coarse grid.
+def _cheap_options(module, fits) -> dict:
+    import inspect
+
+    params = inspect.signature(module.export).parameters
+    opts = {}
+    if "fit" in params:
+        opts["fit"] = fits["gltf_pbr"]
+    if "fits" in params:
+        opts["fits"] = {k: v for k, v in fits.items() if k != "gltf_pbr"}
+    for name, value in (("n_theta_i", 5), ("n_phi_i", 5), ("n", 8), ("n_ndf", 8), ("check", False),
+                        ("width", 16), ("height", 12), ("spp", 1), ("n_phi", 16), ("n_gamma", 16)):
+        if name in params:
+            opts[name] = value
+    if any(p.kind is p.VAR_KEYWORD for p in params.values()):  # mitsuba-scene: options of its .bsdf
+        opts.update(n_theta_i=5, n_phi_i=5, n=8, n_ndf=8)
+    return opts
+
+
+@pytest.mark.parametrize("fmt", sorted(FORMATS))
+def test_every_registered_format_returns_an_export_result(tmp_path, kes_model, fits, fmt):
+    """Every name in ``FORMATS`` (a new format is covered without editing this test)
+    writes through the framework and reports an ExportResult naming files that exist."""
+    from kesbrdf.export import format_module
+
+    try:
+        module = format_module(fmt)
+    except ImportError as exc:
+        pytest.skip(f"{fmt}: optional dependency missing ({exc})")
+    ext = (getattr(module, "EXTENSIONS", ()) or (".out",))[0]
+    try:
+        result = export(kes_model, fmt, tmp_path / f"m{ext}", **_cheap_options(module, fits))
+    except ImportError as exc:
+        pytest.skip(f"{fmt}: optional dependency missing ({exc})")
+    assert isinstance(result, ExportResult) and result.format == fmt
+    assert result.paths and all(p.is_file() for p in result.paths)
+    assert result.size == sum(p.stat().st_size for p in result.paths) > 0
+    assert result.to_json()["format"] == fmt  # JSON-ready: the demo and batch write it as is

@@ -133,7 +133,7 @@ def test_the_fit_is_computed_once_per_model_content(tmp_path, monkeypatch, kes_m
     Surface, preview) the first time, none for the same content again, whether the model
     object is the same, reloaded from its file (memory) or in a new process (disk)."""
     from kesbrdf.export import export
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     monkeypatch.setenv("KESBRDF_CACHE_DIR", str(tmp_path / "cache"))
     fit_cache.clear_memory()

@@ -39,7 +39,7 @@ def test_preview_mesh_tangent_frame(mesh):
 def test_gltf_material_carries_fit_and_extensions(tmp_path, kes_model, fits):
     res = gltf.export(kes_model, tmp_path / "f.gltf", fit=fits["gltf_pbr"])
     doc = json.loads((tmp_path / "f.gltf").read_text())
-    assert res["size"] == (tmp_path / "f.gltf").stat().st_size
+    assert res.size == (tmp_path / "f.gltf").stat().st_size
     assert set(doc["extensionsUsed"]) == {"KHR_materials_anisotropy", "KHR_materials_sheen", "KHR_materials_specular", "KHR_materials_ior"}
     mat = doc["materials"][0]
     ext = mat["extensions"]

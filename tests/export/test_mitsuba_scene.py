@@ -105,3 +105,26 @@ def test_measured_scene_renders_in_the_mitsuba_command_line(scene_files, tmp_pat
                          timeout=120)
     assert run.returncode == 0, run.stderr[-2000:]
     assert img.is_file() and img.stat().st_size > 0
+
+
+def test_the_measured_scene_reuses_the_rgl_tensor_built_in_this_process(tmp_path, monkeypatch):
+    """``kesbrdf demo`` exports rgl-bsdf, then mitsuba-scene: the second must not rebuild the
+    tensor (15 s of the demo), and must write the same bytes; another model rebuilds."""
+    from kesbrdf.export import export, rgl_bsdf
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
+    from kesbrdf.references.ward import AnisotropicWard
+
+    calls = []
+    real = rgl_bsdf.build_fields
+    monkeypatch.setattr(rgl_bsdf, "build_fields", lambda *a, **k: calls.append(1) or real(*a, **k))
+    monkeypatch.setattr(rgl_bsdf, "_FIELDS_MEMO", {})
+    small = dict(n_theta_i=5, n_phi_i=9, n=12, n_ndf=16, check=False)
+    model = fit(measure(AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1)))
+    export(model, "rgl-bsdf", tmp_path / "a.bsdf", **small)
+    export(model, "mitsuba-scene", tmp_path / "s" / "fabric.xml", **small)
+    assert len(calls) == 1
+    assert (tmp_path / "a.bsdf").read_bytes() == (tmp_path / "s" / "fabric.bsdf").read_bytes()
+    other = fit(measure(AnisotropicWard(0.2, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.1)))
+    export(other, "rgl-bsdf", tmp_path / "b.bsdf", **small)
+    assert len(calls) == 2

@@ -24,7 +24,7 @@ def test_mtlx_validates_against_the_standard_libraries(tmp_path, kes_model, fits
     ok, message = doc.validate()
     assert ok, message
     names = {m.getName() for m in doc.getMaterialNodes()}
-    assert names == {"kesbrdf_fabric_openpbr", "kesbrdf_fabric_standard_surface"} == set(res["materials"])
+    assert names == {"kesbrdf_fabric_openpbr", "kesbrdf_fabric_standard_surface"} == set(res.agreement["materials"])
     opbr = doc.getNode("kesbrdf_fabric_openpbr_shader")
     assert opbr.getCategory() == "open_pbr_surface"
     assert opbr.getNodeDefString() == "" and opbr.getNodeDef().getName() == "ND_open_pbr_surface_surfaceshader"
@@ -75,7 +75,7 @@ def test_usd_stage_opens_with_the_material_bound(tmp_path, kes_model, fits):
 
     out = tmp_path / "fabric.usda"
     res = usd.export(kes_model, out, fits=fits)
-    assert (tmp_path / "fabric.mtlx").exists() and res["paths"][1].endswith("fabric.mtlx")
+    assert (tmp_path / "fabric.mtlx").exists() and res.paths[1].name == "fabric.mtlx"
     stage = Usd.Stage.Open(str(out))
     assert stage is not None
     for prim_path in ("/Preview/swatch", "/Preview/sphere"):

@@ -3,9 +3,10 @@
 Original-format files are rebuilt in ``tmp_path`` from the committed extract
 ``tests/data/curet_fabrics.csv`` (see tests/data/README.md), so these tests need
 nothing outside the repository; one extra test compares with the full database when
-``/work/shared/data/curet`` is present.
+``$KESBRDF_CURET_DIR`` names a folder holding it (``table.txt``, ``abrdf.dat``).
 """
 
+import os
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,7 @@ from source_helpers import write_curet
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 EXTRACT = DATA / "curet_fabrics.csv"
-SHARED = Path("/work/shared/data/curet")
+SHARED = Path(os.environ["KESBRDF_CURET_DIR"]) if os.environ.get("KESBRDF_CURET_DIR") else None
 
 #: The extract stores angles in degrees rounded to 1e-9°, i.e. 2e-11 rad.
 ANGLE_ATOL = 1e-10
@@ -120,7 +121,7 @@ def test_non_numeric_value(tmp_path):
         read_curet(tmp_path / "table.txt", tmp_path / "abrdf.dat", 1)
 
 
-@pytest.mark.skipif(not SHARED.exists(), reason="full CUReT files not available")
+@pytest.mark.skipif(SHARED is None or not SHARED.exists(), reason="full CUReT files not available ($KESBRDF_CURET_DIR)")
 def test_extract_matches_full_database(extract):
     for s, name in FABRICS.items():
         m = read_curet(SHARED / "table.txt", SHARED / "abrdf.dat", s)

@@ -9,7 +9,7 @@ from kesbrdf.errors import KesbrdfError
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.plotting import figures as F
 
-#: The model reproduces every in-plane sample to round-off (DESIGN §4); the curves are
+#: The model reproduces every in-plane sample to round-off (docs/method.md, "From the table to a BRDF"); the curves are
 #: evaluated at exactly the measured γ (1° grid), so only float round-off remains.
 ROUND_TRIP_RTOL = 1e-9
 #: Fig. 5 recomputes lookup() exactly as the figure does: only product round-off.

@@ -7,9 +7,9 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from kesbrdf.plotting.report import REPORT_FIGURES, build_report, collect, write_report
+from kesbrdf.plotting.report import REPORT_FIGURES, ReportInputs, build_report, collect, write_report
 
-#: The model reproduces its in-plane input samples to round-off (DESIGN §4); f_r is O(1)/sr.
+#: The model reproduces its in-plane input samples to round-off (docs/method.md, "From the table to a BRDF"); f_r is O(1)/sr.
 ROUND_TRIP_RMSE = 1e-12
 
 METRICS = {
@@ -54,8 +54,9 @@ def _parse(text):
 @pytest.fixture(scope="module")
 def report_text(satin_model, satin_measurement, satin_ref, tmp_path_factory):
     path = tmp_path_factory.mktemp("rep") / "report.html"
-    write_report(path, satin_model, satin_measurement, satin_ref, metrics=METRICS, diagnostics=DIAGNOSTICS,
-                 title="Test <report>", figure_options={"6": {"n": 31}, "3b": {"n_gamma": 9, "n_psi": 5}}, dpi=40)
+    write_report(path, ReportInputs(satin_model, satin_measurement, satin_ref, metrics=METRICS, diagnostics=DIAGNOSTICS,
+                                    title="Test <report>", figure_options={"6": {"n": 31}, "3b": {"n_gamma": 9, "n_psi": 5}},
+                                    dpi=40))
     assert [p.name for p in path.parent.iterdir()] == ["report.html"]  # one file, nothing else
     return path.read_text(encoding="utf-8")
 
@@ -98,13 +99,13 @@ def test_report_has_provenance(report_text, satin_model):
 
 
 def test_missing_inputs_become_notes(satin_measurement):
-    text = build_report(measurement=satin_measurement, metrics={"a": 1}, figures=("3a", "4"), dpi=30)
+    text = build_report(ReportInputs(measurement=satin_measurement, metrics={"a": 1}, figures=("3a", "4"), dpi=30))
     assert len(_parse(text).imgs) == 1
     assert "Figure 4 not drawn: figure 4: expected a model, got none" in text
 
 
 def test_figure_dir_gets_the_figures(satin_model, tmp_path):
-    write_report(tmp_path / "r.html", satin_model, figures=("5",), figure_dir=tmp_path / "figs", dpi=30)
+    write_report(tmp_path / "r.html", ReportInputs(satin_model, figures=("5",), figure_dir=tmp_path / "figs", dpi=30))
     assert (tmp_path / "figs" / "fig5.png").read_bytes()[:4] == b"\x89PNG"
 
 
@@ -123,3 +124,22 @@ def test_summary_collects_key_numbers(report_text):
     assert "reciprocity error" in summary and "3.25e-16" in summary
     assert re.search(r"albedo, max per channel</td><td[^>]*>.*1\.25", summary)
     assert "incident directions with albedo &gt; 1</td><td>1<" in summary
+
+
+def test_report_names_its_model_at_the_top(satin_model, satin_measurement):
+    """Issue 19: the report says which model it is about (kind, content hash) and why the
+    fit chose it, before anything else, and the hash is the model's content hash."""
+    import kesbrdf
+    from kesbrdf.pipeline import model_sha256
+
+    model, fit_report = kesbrdf.fit(satin_measurement, kind="kes")
+    text = build_report(ReportInputs(model, figures=(), notes=["renders skipped: a one-line reason"]))
+    head = text[: text.index("<h2 id=inputs>")]
+    digest = model_sha256(model)
+    assert len(digest) == 64 and f"<td class=txt>{digest}</td>" in head
+    assert "<td class=txt>kes</td>" in head and f"<td class=txt>{fit_report.reason}</td>" in head
+    assert "renders skipped: a one-line reason" in head
+    # a different model (another table) has another hash; equal content, equal hash
+    assert model_sha256(satin_model) != digest or np.array_equal(satin_model.table, model.table)
+    twin = kesbrdf.fit(satin_measurement, kind="kes")[0]
+    assert model_sha256(twin) == digest

@@ -1,5 +1,5 @@
 """Tests of kesbrdf.references.rgl on the committed RGL-EPFL white acrylic felt, and the
-end-to-end check DESIGN and data/README ask for: an isotropic measured material, put
+end-to-end check tests/data/README asks for: an isotropic measured material, put
 through the paper's protocol at four orientations and fitted, must come back at every
 orientation.
 
@@ -46,7 +46,7 @@ ALBEDO_MIN = 0.5
 HELD_OUT_SYMMETRIC_RTOL = 2 * POLE_ANISOTROPY_RTOL
 #: KES on the raw felt: the measurement is not reciprocal (0.114 max on the paper
 #: line, at θ_i = 78°), so the +γ and −γ halves of each orientation differ and the
-#: whole-circle interpolation (DESIGN §4) carries that difference as odd harmonics
+#: whole-circle interpolation (docs/method.md, "From the table to a BRDF") carries that difference as odd harmonics
 #: between the orientations: held-out error measured 0.0200 (ψ = 112.5°, θ_i = 12°).
 #: It must stay below the data's own non-reciprocity; the regression bound has a 25 %
 #: margin.

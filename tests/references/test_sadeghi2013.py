@@ -1,8 +1,9 @@
 """Tests of the Sadeghi et al. (2013) microcylinder cloth BRDF.
 
-Reference numbers are from ``shared/reference/sadeghi2013.md`` §8 (a numpy transcription
-of the same notes, so they test an implementation *of the notes*; the paper's text was not
-available). Each test names the section it checks.
+Reference numbers are the sanity checks of kesbrdf's implementation notes on the paper
+(a numpy transcription of those notes, so they test an implementation *of the notes*; the
+paper's text was not available; :mod:`kesbrdf.references.sadeghi2013` states what the
+notes decide). Each test names the check ("§8 G": golden values, "§8 B": non-reciprocity).
 """
 
 from __future__ import annotations
@@ -163,7 +164,7 @@ def test_white_furnace_albedo_table(albedo, preset):
     brdf = Sadeghi2013(white(preset), sampling="control_points", reciprocal=False)
     rho = np.array([albedo(brdf, sph(*g))[0] for g in ALBEDO_GEOMETRIES])
     np.testing.assert_allclose(rho, WHITE_FURNACE[preset], rtol=0, atol=TABLE_ATOL)
-    # the published model is *not* energy-bounded at A = 1 (notes §7.1.2)
+    # the published model is *not* energy-bounded at A = 1
     if preset in ("silk_crepe", "satin", "satin_back", "silk_shot"):
         assert rho[0] > 1.3
 

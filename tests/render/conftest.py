@@ -1,6 +1,6 @@
 """Fixtures for the renderer tests: small model files fitted from reference BRDFs.
 
-Every test here needs Mitsuba 3 with an LLVM ≥ 17 backend (DESIGN §7).  When ``mitsuba``
+Every test here needs Mitsuba 3 with an LLVM ≥ 17 backend (docs/architecture.md, "Tools it runs on").  When ``mitsuba``
 or ``drjit`` is not installed, each test module of this folder is reported as SKIPPED
 (one entry per module, with the reason), not silently left out: the modules are not
 imported, since they need the renderer at import time.

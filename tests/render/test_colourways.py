@@ -22,7 +22,7 @@ def test_sheet_has_one_tile_per_colour_in_that_colour(render_module, model_files
 
 
 def test_gloss_is_kept_across_colourways(render_module, model_files):
-    """The lobe part of f_r does not depend on base_color (DESIGN §5)."""
+    """The lobe part of f_r does not depend on base_color (docs/method.md, "Colour")."""
     import drjit as dr
     import mitsuba as mi
 

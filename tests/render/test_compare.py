@@ -115,15 +115,15 @@ def test_chi2_halfdiff_sampling(render_module, tmp_path, monkeypatch, theta):
 
 
 def test_report_embeds_the_panels(render_module, tmp_path):
-    from kesbrdf.plotting.report import build_report
+    from kesbrdf.plotting.report import ReportInputs, build_report
     from kesbrdf.render.compare import compare_render
 
     r = compare_render("satin-ward", "paper", "sphere", _opts(), output=tmp_path / "p.png", noise_floor=False)
-    text = build_report(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}])
+    text = build_report(ReportInputs(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}]))
     assert "Reference vs model renders" in text
     assert text.count('<figure class="compare">') == 1  # the missing panel is skipped
     assert f"FLIP {r['flip']:.3f}" in text
-    assert "Reference vs model renders" not in build_report(figures=())
+    assert "Reference vs model renders" not in build_report(ReportInputs(figures=()))
 
 
 def test_demo_comparisons_step(render_module, tmp_path, monkeypatch):
@@ -172,3 +172,19 @@ def test_halfdiff_fade_changes_only_beyond_the_measured_half_angles(render_modul
     np.testing.assert_allclose(out["fade"][beyond], np.broadcast_to(model.body, out["fade"][beyond].shape), rtol=1e-5)
     with pytest.raises(Exception, match="extrapolation"):
         mi.load_dict({"type": "kesbrdf_halfdiff", "filename": str(path), "extrapolation": "mirror"})
+
+
+def test_compare_fits_with_the_pipeline_fit_step(render_module):
+    """The compare renderer's fit is the pipeline's (issue 19), and gives the same tables as
+    the protocol's KES fit with the log fallback did before."""
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.halfdiff import fit_halfdiff
+    from kesbrdf.models.kes import fit as kes_fit
+    from kesbrdf.render.compare import fit_reference_model, make_reference
+
+    ref = make_reference("satin-ward")
+    for protocol, direct in (("paper", kes_fit), ("dense", fit_halfdiff)):
+        m = measure(ref, protocol=protocol)
+        model, n = fit_reference_model(ref, protocol, "kes", m)
+        assert n == len(m) and model.diagnostics["fit_report"]["reason"] == "asked for"
+        np.testing.assert_array_equal(model.table, direct(m, fallback="log").table)

@@ -6,14 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from bsdf_helpers import eval_cos, random_pairs
+from bsdf_helpers import eval_fr as _eval, random_pairs
 
 _pairs = random_pairs
-
-
-def _eval(bsdf, wi, wr):
-    """f_r (N, 3): Mitsuba's eval with the cosine divided out."""
-    return eval_cos(bsdf, wi, wr) / wi[:, 2:3]
 
 
 pytestmark = pytest.mark.render

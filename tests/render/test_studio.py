@@ -78,14 +78,14 @@ def test_aces_inverse_white_point_and_exposure_rule():
 def test_grey_card_reads_18_percent_in_every_still(render_module, satin, scene):
     """The exposure is metered once on the card, without the subject; in the still with
     the subject in place the card still reads 18 % ± CARD_TOLERANCE (module constant)."""
-    from kesbrdf.render import chart, scenes, studio
+    from kesbrdf.render import chart, exposure, scenes
 
     opts = _opts(spp=32, grey_card=True)
     if scene == "chart":
         e = chart.meter_chart(satin, opts)
         img = scenes.render_scene(chart.load_chart(satin, opts), opts)
     else:
-        e = studio.meter_exposure(satin, scene, opts)
+        e = exposure.meter_exposure(satin, scene, opts)
         img = scenes.render_scene(scenes.load_scene(satin, scene, opts), opts)
     rows, cols = scenes.grey_card_box(SMALL)
     reading = float(_luminance(_display(img, e)[rows, cols]).mean())
@@ -157,10 +157,10 @@ def test_sheen_is_visible_on_every_dyed_colour(render_module, satin):
     ≈ 5 × the black's), three times that.  A dyed colourway whose sheen were drowned or dropped (the matte look of
     the issue) would fall far outside.
     """
-    from kesbrdf.render import scenes, studio
+    from kesbrdf.render import exposure, scenes
 
     opts = _opts(spp=32, resolution=(96, 72))
-    o = replace(opts, exposure=studio.meter_exposure(satin, "sphere", opts))
+    o = replace(opts, exposure=exposure.meter_exposure(satin, "sphere", opts))
     mask = _disc((0.0, 0.0), 0.2 * 72, (72, 96))
 
     def lum(**kw):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import http.client
 import json
 import os
-import threading
 from pathlib import Path
 
 import pytest
@@ -54,21 +53,14 @@ def site(tmp_path, model_file):
 
 
 @pytest.fixture
-def server(site, model_file):
-    srv = make_server(
+def server(site, model_file, run_server):
+    return run_server(make_server(
         model_files=[model_file],
         model_dirs=[site["models"]],
         port=0,
         static_dir=site["static"],
         max_upload_bytes=LIMIT,
-    )
-    # short poll so shutdown() returns quickly
-    thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True)
-    thread.start()
-    yield srv
-    srv.shutdown()
-    srv.server_close()
-    thread.join(TIMEOUT)
+    ))
 
 
 def request(srv, method, path, body=None, headers=None):

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from kesbrdf.viewer.server import ViewerLimits, make_server
+from server_helpers import post_json
 
 #: Longest any single wait of these tests lasts (s): far beyond every deadline under test.
 WAIT_S = 20.0
@@ -31,22 +32,9 @@ ANSWER_S = 1.0
 
 
 @pytest.fixture
-def start():
+def start(run_server):
     """Start servers with given limits; stop them after the test."""
-    started = []
-
-    def _start(**limits):
-        srv = make_server(port=0, limits=ViewerLimits(**limits))
-        thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True)
-        thread.start()
-        started.append((srv, thread))
-        return srv
-
-    yield _start
-    for srv, thread in started:
-        srv.shutdown()
-        srv.server_close()
-        thread.join(WAIT_S)
+    return lambda **limits: run_server(make_server(port=0, limits=ViewerLimits(**limits)))
 
 
 def _get_config(srv, timeout=WAIT_S):
@@ -147,23 +135,30 @@ def test_200_concurrent_gets_are_all_answered_in_full(start):
     assert _get_config(srv)[0] == 200
 
 
-def test_a_slow_request_head_is_cut_at_its_deadline(start):
-    deadline = 1.0
-    srv = start(head_timeout_s=deadline)
+def _drip(srv, head: bytes, piece, deadline: float):
+    """Send ``head``, then ``piece(k)`` every 0.1 s until the server closes or the deadline
+    plus :data:`SLACK_S` passes; returns (bytes received, seconds from the first piece)."""
     with socket.create_connection(srv.server_address[:2], timeout=WAIT_S) as sock:
-        sock.sendall(b"GET /api/config HTTP/1.1\r\n")
+        sock.sendall(head)
         t0 = time.monotonic()
         received = b""
-        for k in range(int((deadline + SLACK_S) / 0.1) + 1):  # a header line every 0.1 s
+        for k in range(int((deadline + SLACK_S) / 0.1) + 1):
             try:
-                sock.sendall(f"X-Slow-{k}: 1\r\n".encode())
+                sock.sendall(piece(k))
             except OSError:
                 break
             closed, chunk, _ = _read_until_closed(sock, 0.1)
             received += chunk
             if closed:
                 break
-        elapsed = time.monotonic() - t0
+        return received, time.monotonic() - t0
+
+
+def test_a_slow_request_head_is_cut_at_its_deadline(start):
+    deadline = 1.0
+    srv = start(head_timeout_s=deadline)
+    # a header line every 0.1 s
+    received, elapsed = _drip(srv, b"GET /api/config HTTP/1.1\r\n", lambda k: f"X-Slow-{k}: 1\r\n".encode(), deadline)
     assert received.startswith(b"HTTP/1.1 408"), received[:80]
     assert deadline - 0.1 <= elapsed < deadline + SLACK_S, f"cut after {elapsed:.2f} s"
     assert b"request head incomplete after 1 s" in received
@@ -173,20 +168,9 @@ def test_a_slow_request_head_is_cut_at_its_deadline(start):
 def test_a_slow_body_is_cut_at_its_deadline(start):
     deadline = 1.0
     srv = start(body_timeout_s=deadline)
-    with socket.create_connection(srv.server_address[:2], timeout=WAIT_S) as sock:
-        sock.sendall(b"POST /api/fit?name=slow.csv HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 1000\r\n\r\n")
-        t0 = time.monotonic()
-        received = b""
-        for _ in range(int((deadline + SLACK_S) / 0.1) + 1):  # one body byte every 0.1 s
-            try:
-                sock.sendall(b"0")
-            except OSError:
-                break
-            closed, chunk, _ = _read_until_closed(sock, 0.1)
-            received += chunk
-            if closed:
-                break
-        elapsed = time.monotonic() - t0
+    # one body byte every 0.1 s
+    head = b"POST /api/fit?name=slow.csv HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Length: 1000\r\n\r\n"
+    received, elapsed = _drip(srv, head, lambda k: b"0", deadline)
     assert received.startswith(b"HTTP/1.1 408"), received[:80]
     assert deadline - 0.1 <= elapsed < deadline + SLACK_S, f"cut after {elapsed:.2f} s"
     error = json.loads(received.partition(b"\r\n\r\n")[2])["error"]
@@ -206,15 +190,7 @@ def _scattered_csv(rows: int, seed: int = 7) -> bytes:
     return ("\n".join(lines) + "\n").encode()
 
 
-def _post(srv, path: str, body: bytes, timeout: float = WAIT_S):
-    host, port = srv.server_address[:2]
-    conn = http.client.HTTPConnection(host, port, timeout=timeout)
-    try:
-        conn.request("POST", path, body=body, headers={"Content-Length": str(len(body))})
-        resp = conn.getresponse()
-        return resp.status, json.loads(resp.read())
-    finally:
-        conn.close()
+_post = post_json
 
 
 #: CPU and wall-clock budget of the fit under test (s); the upload's fit takes about

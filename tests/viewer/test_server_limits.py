@@ -5,7 +5,6 @@ from __future__ import annotations
 import http.client
 import json
 import socket
-import threading
 import time
 
 import pytest
@@ -13,9 +12,10 @@ import pytest
 from kesbrdf.measure.demo_data import embedded_measurement
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.io.text import MAX_LINE_CHARS
-from kesbrdf.models.kes import load
+from kesbrdf.io.model_file import load_model as load
 from kesbrdf.viewer import server as server_module
 from kesbrdf.viewer.server import MAX_FIT_CHANNELS, ModelStore, ViewerLimits, make_server
+from server_helpers import post_json
 
 #: Head and body deadlines of the servers under test (s): short so that the tests are quick.
 SHORT_TIMEOUT_S = 0.5
@@ -24,34 +24,17 @@ WAIT_S = 20.0
 
 
 @pytest.fixture
-def serve(tmp_path):
+def serve(run_server):
     """Start servers with short head and body deadlines; stop them after the test."""
-    started = []
 
     def start(limits=None, **kwargs):
         limits = limits or ViewerLimits(head_timeout_s=SHORT_TIMEOUT_S, body_timeout_s=SHORT_TIMEOUT_S)
-        srv = make_server(port=0, limits=limits, **kwargs)
-        thread = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.02}, daemon=True)
-        thread.start()
-        started.append((srv, thread))
-        return srv
+        return run_server(make_server(port=0, limits=limits, **kwargs))
 
-    yield start
-    for srv, thread in started:
-        srv.shutdown()
-        srv.server_close()
-        thread.join(WAIT_S)
+    return start
 
 
-def post(srv, path, body):
-    host, port = srv.server_address[:2]
-    conn = http.client.HTTPConnection(host, port, timeout=WAIT_S)
-    try:
-        conn.request("POST", path, body=body, headers={"Content-Length": str(len(body))})
-        resp = conn.getresponse()
-        return resp.status, json.loads(resp.read())
-    finally:
-        conn.close()
+post = post_json
 
 
 def get(srv, path):

@@ -10,7 +10,7 @@ import path from 'node:path';
 import { chromium } from 'playwright-core';
 
 const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
-// same flags as tests/run.mjs (DESIGN §7): WebGL on SwiftShader
+// same flags as tests/run.mjs (docs/architecture.md, "Tools it runs on"): WebGL on SwiftShader
 const FLAGS = ['--no-sandbox', '--disable-background-networking', '--disable-component-update',
   '--disable-sync', '--no-first-run', '--enable-unsafe-swiftshader', '--use-angle=swiftshader'];
 

@@ -1,5 +1,5 @@
 // Load a .glb with three.js GLTFLoader in headless Chromium and render its sphere next to
-// the kesbrdf GLSL preview (src/shaders/kes_brdf.glsl) of the same model, same light and
+// the kesbrdf GLSL preview (src/shaders/kes_table.glsl + ../src/kesbrdf/shaders/kes_brdf.glsl) of the same model, same light and
 // camera; print both linear images' statistics and their difference.
 //   node scripts/gltf-render.mjs IN.json OUT.json
 // IN.json: {"glb": "path.glb" (or "glbs": [paths]: one result per file, in "results"), "model": {"nPhi","nGamma","dGamma","table": [RGBA...], "body": [r,g,b]},
@@ -13,7 +13,8 @@ import { VIEWER, openThreePage } from './three-page.mjs';
 const [inPath, outPath] = process.argv.slice(2);
 const input = JSON.parse(fs.readFileSync(inPath, 'utf-8'));
 const glbPaths = input.glbs ?? [input.glb];
-const kesGlsl = fs.readFileSync(path.join(VIEWER, 'src', 'shaders', 'kes_brdf.glsl'), 'utf-8');
+const kesGlsl = fs.readFileSync(path.join(VIEWER, 'src', 'shaders', 'kes_table.glsl'), 'utf-8') + '\n' +
+  fs.readFileSync(path.join(VIEWER, '..', 'src', 'kesbrdf', 'shaders', 'kes_brdf.glsl'), 'utf-8');
 
 const { page, errors, close } = await openThreePage();
 try {

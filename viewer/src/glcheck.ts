@@ -1,9 +1,11 @@
 /**
- * GLSL–Python agreement: evaluate the preview's GLSL chunk (shaders/kes_brdf.glsl)
+ * GLSL–Python agreement: evaluate the preview's GLSL (shaders/kes_table.glsl + src/kesbrdf/shaders/kes_brdf.glsl)
  * for a list of direction pairs into an RGBA32F framebuffer and read the pixels back.
  * Used by the browser tests (window.kesbrdf.evalPairsGL) and nothing else.
  */
-import kesBrdfGlsl from './shaders/kes_brdf.glsl?raw';
+import kesTableGlsl from './shaders/kes_table.glsl?raw';
+// the one copy of the model's GLSL, shared with the BRDF Explorer export
+import kesEvalGlsl from '../../src/kesbrdf/shaders/kes_brdf.glsl?raw';
 import { MAPPING_CODE, type KesModel, type Mapping, type Vec3 } from './model';
 import { tableTextureData } from './texture';
 
@@ -14,7 +16,8 @@ void main() { gl_Position = vec4(aPos, 0.0, 1.0); }`;
 const FRAG = `#version 300 es
 precision highp float;
 precision highp int;
-${kesBrdfGlsl}
+${kesTableGlsl}
+${kesEvalGlsl}
 uniform highp sampler2D pairWi;
 uniform highp sampler2D pairWr;
 out vec4 fragColor;

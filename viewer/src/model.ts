@@ -2,7 +2,7 @@
  * The kesbrdf model file (docs/formats.md, format version 1) and its evaluation.
  *
  * Everything here follows the recipe of docs/formats.md "How to evaluate a model"
- * exactly; the GLSL chunk in shaders/kes_brdf.glsl is the same recipe on the GPU.
+ * exactly; the GLSL in src/kesbrdf/shaders/kes_brdf.glsl is the same recipe on the GPU.
  * Fabric frame: x = warp, y = weft, z = normal; wi toward the light, wr toward the
  * viewer; radians; f_r in 1/sr.
  */
@@ -320,7 +320,7 @@ function paperEvaluate(m: KesModel, wi: Vec3, wr: Vec3, out: Float64Array, body:
 
 /**
  * f_r = c + fade(γ)·q/w (1/sr) of the model for one pair, per channel (docs/formats.md steps 1–3).
- * `body` replaces the model's body term when given (DESIGN §5 colourways).
+ * `body` replaces the model's body term when given (colourways: docs/method.md, "Colour").
  */
 export function evaluate(
   m: KesModel,

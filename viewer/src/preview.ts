@@ -1,12 +1,14 @@
 /**
  * Real-time preview: a lit sphere, a flat swatch or a draped cloth (a drape mesh PLY
  * when given, else a procedural fold) shaded by the model in GLSL
- * (shaders/kes_brdf.glsl). The warp direction is the mesh's UV-u tangent dP/du, the
+ * (shaders/kes_table.glsl + src/kesbrdf/shaders/kes_brdf.glsl). The warp direction is the mesh's UV-u tangent dP/du, the
  * weft N × T, so a garment's UVs carry the weave like in the Mitsuba renderer.
  */
 import * as THREE from 'three';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
-import kesBrdfGlsl from './shaders/kes_brdf.glsl?raw';
+import kesTableGlsl from './shaders/kes_table.glsl?raw';
+// the one copy of the model's GLSL, shared with the BRDF Explorer export
+import kesEvalGlsl from '../../src/kesbrdf/shaders/kes_brdf.glsl?raw';
 import { MAPPING_CODE, type KesModel, type Mapping, type Vec3 } from './model';
 import { tableTextureData } from './texture';
 
@@ -28,7 +30,8 @@ void main() {
 const FRAGMENT = /* glsl */ `
 precision highp float;
 precision highp int;
-${kesBrdfGlsl}
+${kesTableGlsl}
+${kesEvalGlsl}
 uniform vec3 lightDir;     // world space, toward the light
 uniform float exposure;    // linear scale 2^EV
 uniform float ambient;     // fraction of the body colour added as fill light
@@ -190,7 +193,7 @@ export class Preview {
     this.invalidate();
   }
 
-  /** Body colour (linear RGB albedo) or null for the model's own body term (DESIGN §5: f_body = base_color/π). */
+  /** Body colour (linear RGB albedo) or null for the model's own body term (docs/method.md, "Colour": f_body = base_color/π). */
   setBaseColor(linearRGB: [number, number, number] | null): void {
     this.bodyOverride = linearRGB ? [linearRGB[0] / Math.PI, linearRGB[1] / Math.PI, linearRGB[2] / Math.PI] : null;
     this.updateBody();

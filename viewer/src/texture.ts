@@ -1,4 +1,4 @@
-/** The model table as RGBA float texture data for the GLSL chunk (shaders/kes_brdf.glsl). */
+/** The model table as RGBA float texture data for the GLSL chunk (shaders/kes_table.glsl). */
 import type { KesModel } from './model';
 
 /**

@@ -17,7 +17,7 @@ const REPO = path.resolve(VIEWER, '..');
 const PYTHON = path.resolve(VIEWER, process.env.KESBRDF_PYTHON ?? '../.venv/bin/python');
 const CHROMIUM = process.env.CHROMIUM ?? '/usr/bin/chromium';
 const OUT = path.join(VIEWER, 'test-output');
-// DESIGN §7 flags; --enable-unsafe-swiftshader keeps WebGL on SwiftShader where the
+// the flags of docs/architecture.md, "Tools it runs on"; --enable-unsafe-swiftshader keeps WebGL on SwiftShader where the
 // automatic software fallback is switched off in newer Chromium builds.
 const CHROMIUM_FLAGS = [
   '--no-sandbox', '--disable-background-networking', '--disable-component-update',
@@ -301,7 +301,7 @@ async function main() {
       await shot('light-dragged-hemi');
     });
 
-    await test('changing the body colour recolours the preview (DESIGN §5)', async () => {
+    await test('changing the body colour recolours the preview (docs/method.md, "Colour")', async () => {
       await showView('preview');
       await page.selectOption('#object', 'cloth');
       await settle();

@@ -55,7 +55,6 @@ DEFAULT_OPTIONS: dict = {
 }
 OPTION_COLUMNS = tuple(DEFAULT_OPTIONS)
 META_COLUMNS = ("notes", "name", "description")
-KINDS = ("auto", "kes", "kes-halfdiff", "scattered")
 _ID = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9._-]{0,127}$")
 
 
@@ -106,8 +105,11 @@ def _parse_option(name: str, text: str):
             raise ValueError(f"expected a JSON object, got {text!r}")
         return value
     if name == "kind":
-        if text not in KINDS:
-            raise ValueError(f"expected one of {', '.join(KINDS)}, got {text!r}")
+        from kesbrdf.models.base import known_fitters  # the registry: every kind and fitter
+
+        kinds = ("auto",) + known_fitters()
+        if text not in kinds:
+            raise ValueError(f"expected one of {', '.join(kinds)}, got {text!r}")
         return text
     if name == "orientations":
         if text not in ("3", "4"):

@@ -1,4 +1,9 @@
-"""The per-fabric steps: each a pure function of its input files and parameters.
+"""The per-fabric steps of a batch: the pipeline's steps (:mod:`kesbrdf.pipeline`) on files.
+
+Each batch step reads its inputs from files, calls the pipeline step of the same name
+(the one ``kesbrdf demo`` runs: the same fit rule as ``kesbrdf fit``, the same
+validation, report, exports and preview) and writes its outputs to files; the
+engine adds the skip rule, the cache and Dask on top (docs/batch.md, docs/pipeline.md).
 
 A step function ``step(inputs, params, out) -> result`` reads the local files named in
 ``inputs`` (``{"<upstream step>/<file>": Path}``, or ``{"input": Path}`` for
@@ -12,10 +17,12 @@ step       needs                           writes
 =========  ==============================  ==========================================
 ingest     the catalogue input             ``measurement.csv`` (manifests: frames →
                                            values; CSVs: the bytes as given, checked)
-fit        ingest                          ``model.kes.json``
+fit        ingest                          ``model.kes.json`` (the chosen model,
+                                           any kind) and ``fit_report.json``
 validate   ingest, fit                     ``validation.json`` (round trip, leave-one-
                                            orientation-out, reference when given)
-report     ingest, fit, validate           ``report.html`` (the paper's figures)
+report     ingest, fit, validate           ``report.html`` (the paper's figures;
+                                           metrics from ``validation.json``)
 export     fit                             ``<format>/model.<ext>`` per format in
                                            ``export.FORMATS``, plus ``export.json``
 preview    fit                             ``preview.png`` and ``colourways.png``
@@ -32,6 +39,7 @@ from pathlib import Path
 
 from kesbrdf._atomic import write_bytes, write_text
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.pipeline.outputs import PREVIEW_DEFAULTS  # preview render settings (one contact-sheet tile)
 
 __all__ = ["STEPS", "DEPENDS", "STEP_FUNCTIONS", "RENDER_STEPS", "closure", "step_params",
            "fit_model", "make_fabric_reference", "PREVIEW_DEFAULTS"]
@@ -46,12 +54,6 @@ DEPENDS = {
     "preview": ("fit",),
 }
 RENDER_STEPS = ("preview",)
-#: Preview render settings (one tile of the contact sheet): 256 × 192 in the studio
-#: (soft boxes, windows, ACES, exposure metered on the grey card, docs/rendering.md
-#: "Studio"), denoised by OIDN when installed, so a satin's highlight can be judged.
-PREVIEW_DEFAULTS = {"scene": "sphere", "spp": 16, "resolution": [256, 192],
-                    "colourway_spp": 4, "colourway_resolution": [128, 96], "colourways": 6}
-PREVIEW_DENOISE_MIN_PIXELS = 128 * 96
 
 
 def closure(steps) -> tuple[str, ...]:
@@ -77,7 +79,11 @@ def step_params(step: str, options: dict, settings: dict | None = None) -> dict:
     if step == "ingest":
         return {"saturation": "reject"}
     if step == "fit":
-        return {k: o.get(k) for k in ("kind", "orientations", "fallback", "body", "interpolation", "warp_deg")}
+        from kesbrdf.pipeline import FIT_OPTION_NAMES
+
+        # "rule": the fit rule of kesbrdf fit (compare with the prior); part of the key,
+        # so models fitted by the older batch rule (no comparison) are refitted
+        return {"rule": "kesbrdf-fit", **{k: o.get(k) for k in ("kind",) + FIT_OPTION_NAMES}}
     if step == "validate":
         return {k: o.get(k) for k in ("reference", "reference_params", "mapping", "fallback")}
     if step == "report":
@@ -128,21 +134,16 @@ def make_fabric_reference(name: str | None, params: dict | None = None):
 
 
 def fit_model(m, params: dict):
-    """Fit one measurement with the fit options of a catalogue row: :func:`kesbrdf.fit`.
-
-    ``kind`` (default ``auto``: the kind that uses every row, docs/models.md) and the
-    options the row gives (orientations, fallback, body, interpolation, warp_deg) go to
-    :func:`kesbrdf.fit`; options left empty keep the library defaults.  The held-out
-    comparison with the woven-cloth prior is off in batches (``compare=False``: it costs a
-    few prior fits per fabric); a catalogue that wants the prior names ``kind=fibre-prior``.
+    """Fit one measurement with the fit options of a catalogue row, by the rule of
+    ``kesbrdf fit`` (:func:`kesbrdf.pipeline.fit`): ``kind`` (default ``auto``, which
+    compares the row-based choice with the woven-cloth prior unless an option is given)
+    and the options the row sets; options left empty keep the library defaults.  So a
+    fabric gets the same model in a batch as from the command.  Returns the
+    :class:`~kesbrdf.pipeline.Fitted`.
     """
-    import kesbrdf
+    from kesbrdf.pipeline import FitSpec, fit
 
-    kind = params.get("kind") or "auto"
-    options = {k: params[k] for k in ("orientations", "fallback", "body", "interpolation", "warp_deg")
-               if params.get(k) not in (None, "")}
-    model, _report = kesbrdf.fit(m, kind=kind, compare=False, **options)
-    return model
+    return fit(m, FitSpec.from_row(params))
 
 
 def _finite(x):
@@ -155,11 +156,9 @@ def _write_json(path: Path, doc) -> None:
 
 
 def is_manifest(path: Path) -> bool:
-    from kesbrdf.io.files import open_regular
+    from kesbrdf.pipeline import is_manifest as _is_manifest
 
-    with open_regular(path) as fh:  # a FIFO or a device is refused, never read
-        head = fh.read(256).decode("utf-8", "replace").lstrip("\ufeff").lstrip()
-    return head.startswith("# kesbrdf-manifest")
+    return _is_manifest(path)
 
 
 def input_files(path: Path) -> list[Path]:
@@ -174,29 +173,17 @@ def input_files(path: Path) -> list[Path]:
 
 # -- the steps ------------------------------------------------------------------------
 def step_ingest(inputs: dict, params: dict, out: Path) -> dict:
-    from kesbrdf.io.files import read_regular
+    from kesbrdf.io.measurement_csv import write_measurement
+    from kesbrdf.pipeline import ingest
 
     src = Path(inputs["input"])
-    if is_manifest(src):
-        from kesbrdf.measure.acquisition.ingest import ingest
-        from kesbrdf.io.measurement_csv import write_measurement
-
-        res = ingest(src, saturation=params.get("saturation", "reject"))
-        write_measurement(out / "measurement.csv", res.measurement)
-        counts = res.counts()
-        _write_json(out / "ingest.json", {"counts": counts,
-                                          "frames": [r.__dict__ for r in res.summary if r.status != "used"]})
-        return {"source": "manifest", "n_samples": len(res.measurement), "frames": counts}
-    from kesbrdf.io.measurement_csv import parse_measurement
-
-    data = read_regular(src)
-    try:
-        text = data.decode("utf-8-sig")
-    except UnicodeDecodeError:
-        raise KesbrdfError(f"{src}: expected a measurement CSV (UTF-8 text), got binary data") from None
-    m = parse_measurement(text, source=str(src))
-    write_bytes(out / "measurement.csv", data)
-    return {"source": "csv", "n_samples": len(m)}
+    got = ingest(src, saturation=params.get("saturation", "reject"))
+    if got.source == "manifest":
+        write_measurement(out / "measurement.csv", got.measurement)
+        _write_json(out / "ingest.json", {"counts": got.counts, "frames": got.dropped})
+        return {"source": "manifest", "n_samples": len(got.measurement), "frames": got.counts}
+    write_bytes(out / "measurement.csv", got.raw)  # the bytes as given (checked by ingest)
+    return {"source": "csv", "n_samples": len(got.measurement)}
 
 
 def _read_m(inputs):
@@ -213,118 +200,93 @@ def _read_m(inputs):
 
 
 def _load_model(inputs):
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model
 
-    return load(inputs["fit/model.kes.json"])
+    return load_model(inputs["fit/model.kes.json"])
+
+
+def _fitted(inputs):
+    """The fit step's model as a :class:`~kesbrdf.pipeline.Fitted` (model, selection, hash)."""
+    from kesbrdf.fitting import FitReport
+    from kesbrdf.pipeline import FitSpec, Fitted, model_sha256
+
+    model = _load_model(inputs)
+    rec = (model.diagnostics or {}).get("fit_report") if isinstance(model.diagnostics, dict) else None
+    rec = rec if isinstance(rec, dict) else {"kind": model.kind, "fitter": model.kind, "reason": "read from a file",
+                                             "rows_total": 0, "rows_used": 0}
+    report = FitReport(**{k: rec[k] for k in FitReport.__dataclass_fields__ if k in rec})
+    return Fitted(model, report, FitSpec(), model_sha256(model) or "")
 
 
 def step_fit(inputs: dict, params: dict, out: Path) -> dict:
     m = _read_m(inputs)
-    model = fit_model(m, params)
-    model.save(out / "model.kes.json")
-    d = getattr(model, "diagnostics", {}) or {}
+    fitted = fit_model(m, params)
+    fitted.save(out / "model.kes.json")
+    _write_json(out / "fit_report.json", {"model_sha256": fitted.sha256, **fitted.selection()})
+    d = getattr(fitted.model, "diagnostics", {}) or {}
     return {
-        "kind": getattr(model, "kind", "kes"),
+        "kind": fitted.kind,
         "n_samples": len(m),
-        "channels": list(model.channels),
+        "channels": list(fitted.model.channels),
         "floored": len(d.get("floored", []) or []),
         "fallback_gamma": len(d.get("fallback_gamma_deg", []) or []),
+        "reason": fitted.report.reason,
     }
 
 
 def step_validate(inputs: dict, params: dict, out: Path) -> dict:
-    from kesbrdf.validate.compare import HELD_OUT_DEG, leave_one_orientation_out, validate
+    from kesbrdf.pipeline import validate
 
     m = _read_m(inputs)
-    model = _load_model(inputs)
-    doc = {"round_trip": validate(model, m, params.get("mapping"))}
-    result = {"fit_nrmse": _finite(doc["round_trip"]["metrics"]["all"]["nrmse"]),
-              "fit_rmse": _finite(doc["round_trip"]["metrics"]["all"]["rmse"])}
-    if getattr(model, "kind", "kes") == "kes" and model.parameters.get("fit") != "scattered":
-        try:
-            loo = leave_one_orientation_out(m, mapping=params.get("mapping") or "deviation",
-                                            fallback=params.get("fallback") or "log")
-        except KesbrdfError as exc:
-            loo = {"error": str(exc)}
-        doc["leave_one_orientation_out"] = loo
-        errs = [v["metrics"]["all"]["nrmse"] for v in loo.values() if isinstance(v, dict) and v.get("possible")]
-        result["loo_nrmse"] = _finite(max(errs)) if errs else None
     ref = make_fabric_reference(params.get("reference"), params.get("reference_params"))
-    if ref is not None:
-        from kesbrdf.measure.gonio import measure
-
-        protocol = "dense" if '"protocol": "dense"' in str(m.metadata.get("generator", "")) else "paper"
-        held = measure(ref, protocol=protocol, orientations_deg=HELD_OUT_DEG)
+    # the protocol of the held-out re-measurement is read from the geometry (pipeline.protocol_of)
+    v = validate(_fitted(inputs), m, ref, mapping=params.get("mapping"), fallback=params.get("fallback") or "log",
+                 baselines=False)
+    doc = {"round_trip": v.round_trip}
+    if v.leave_one_orientation_out is not None:
+        doc["leave_one_orientation_out"] = v.leave_one_orientation_out
+    if v.held_out is not None:
         doc["reference"] = {"name": params.get("reference"), "params": params.get("reference_params"),
-                            "held_out_orientations_deg": list(HELD_OUT_DEG),
-                            "held_out": validate(model, held, params.get("mapping"))}
-        result["ref_nrmse"] = _finite(doc["reference"]["held_out"]["metrics"]["all"]["nrmse"])
+                            "held_out_orientations_deg": v.held_out["held_out_orientations_deg"],
+                            "held_out": {k: x for k, x in v.held_out.items() if k != "held_out_orientations_deg"}}
     _write_json(out / "validation.json", doc)
-    return result
+    return v.numbers()
 
 
 def step_report(inputs: dict, params: dict, out: Path) -> dict:
-    from kesbrdf.plotting.report import collect, write_report
+    from kesbrdf.pipeline.outputs import report, report_inputs
+    from kesbrdf.validate.diagnostics import diagnose
 
     m = _read_m(inputs)
-    model = _load_model(inputs)
+    fitted = _fitted(inputs)
     ref = make_fabric_reference(params.get("reference"), params.get("reference_params"))
-    metrics, diagnostics = collect(model, m, ref, mapping=params.get("mapping") or "deviation")
-    sample = (getattr(model, "input_info", None) or {}).get("sample") or m.metadata.get("sample") or "fabric"
-    opts = {name: {"mapping": params.get("mapping") or "deviation"} for name in ("3a", "3b", "4", "6")}
-    write_report(out / "report.html", model, measurement=m, reference=ref, metrics=metrics,
-                 diagnostics=diagnostics, title=f"kesbrdf report: {sample}", figure_options=opts)
+    mapping = params.get("mapping") or "deviation"
+    metrics = json.loads(Path(inputs["validate/validation.json"]).read_text())
+    sample = (getattr(fitted.model, "input_info", None) or {}).get("sample") or m.metadata.get("sample") or "fabric"
+    opts = {name: {"mapping": mapping} for name in ("3a", "3b", "4", "6")}
+    report(report_inputs(fitted, m, reference=ref, metrics=metrics, diagnostics=diagnose(fitted.model),
+                         title=f"kesbrdf report: {sample}", figure_options=opts), out / "report.html")
     return {"report": "report.html"}
 
 
 def step_export(inputs: dict, params: dict, out: Path) -> dict:
-    import importlib
-    import shutil
-
-    import kesbrdf.export as ex
-
-    import time
+    from kesbrdf.pipeline.outputs import export
 
     model = _load_model(inputs)
     if params["formats"] and os.environ.get("KESBRDF_DRJIT_THREADS"):
         drjit_threads()  # some writers build Mitsuba warps
-    done, failed, seconds = {}, {}, {}
-    for fmt in params["formats"]:
-        name = params["modules"][fmt]  # as resolved when the key was made (not this process's registry)
-        t0 = time.perf_counter()
-        try:  # a format whose optional dependency is missing fails alone
-            module = importlib.import_module(name if "." in name else f"kesbrdf.export.{name}")
-            exts = tuple(getattr(module, "EXTENSIONS", ()) or ()) or (f".{fmt}",)
-            # one folder per format: formats share endings (.bsdf) and write side files
-            (out / fmt).mkdir()
-            target = out / fmt / f"model{exts[0]}"
-            if hasattr(ex, "export"):
-                # the framework looks formats up by name: lend it the module the step's key
-                # names (a step process, or a Dask worker, may not share the caller's registry)
-                before = ex.FORMATS.get(fmt)
-                ex.FORMATS[fmt] = name
-                try:
-                    res = ex.export(model, fmt, target)
-                finally:
-                    if before is None:
-                        ex.FORMATS.pop(fmt, None)
-                    else:
-                        ex.FORMATS[fmt] = before
-            else:  # before the export framework lands: call the format module directly
-                res = module.export(model, target)
-        except (KesbrdfError, ImportError) as exc:
-            failed[fmt] = " ".join(str(exc).split())
-            shutil.rmtree(out / fmt, ignore_errors=True)  # no partial files of a failed format
-            continue
-        finally:
-            seconds[fmt] = time.perf_counter() - t0
-        info = res.to_json() if hasattr(res, "to_json") else {"paths": [str(target)]}
+    # the module each format's key names (a step process, or a Dask worker, may not share
+    # the caller's registry); one folder per format
+    got = export(model, out, params["formats"], stem="model", modules=params["modules"])
+    done = {}
+    for fmt, res in got.results.items():
+        info = res.to_json()
         info["paths"] = [os.path.relpath(p, out) for p in info.get("paths", [])]
         done[fmt] = info
-    _write_json(out / "export.json", {"formats": done, "failed": failed})
+    _write_json(out / "export.json", {"formats": done, "failed": got.failed})
     note = None if params["formats"] else "no export formats installed (kesbrdf.export.FORMATS is empty)"
     # timings go to the manifest's result, never into files (outputs stay bit-reproducible)
-    return {"formats": sorted(done), "failed": failed, "note": note, "seconds": seconds,
+    return {"formats": sorted(done), "failed": got.failed, "note": note, "seconds": got.seconds,
             "paths": [p for v in done.values() for p in v["paths"]]}
 
 
@@ -353,31 +315,10 @@ def drjit_threads(required: bool = False) -> int | None:
 
 def step_preview(inputs: dict, params: dict, out: Path) -> dict:
     threads = drjit_threads(required=True)
-    from kesbrdf.render import scenes
-    from kesbrdf.render.colourways import DEFAULT_COLOURWAYS, render_colourways
+    from kesbrdf.pipeline.outputs import preview
 
-    import importlib.util
-    from dataclasses import replace
-
-    from kesbrdf.render.studio import meter_exposure
-
-    model_path = inputs["fit/model.kes.json"]
-    oidn = importlib.util.find_spec("pyoidn") is not None
-
-    def denoise(res):  # below 128 x 96 pixels OIDN's set-up costs more than a few more spp
-        return oidn and int(res[0]) * int(res[1]) >= PREVIEW_DENOISE_MIN_PIXELS
-
-    res = tuple(params["resolution"])
-    opts = scenes.RenderOptions(spp=int(params["spp"]), resolution=res, env="studio-hdr", light="studio",
-                                tonemap="aces", denoise=denoise(res))
-    opts = replace(opts, exposure=meter_exposure(model_path, params["scene"], opts))
-    scenes.render_still(model_path, params["scene"], out / "preview.png", opts)
-    cres = tuple(params["colourway_resolution"])
-    copts = replace(opts, spp=int(params["colourway_spp"]), resolution=cres, denoise=denoise(cres))
-    n = int(params["colourways"])
-    render_colourways(model_path, out / "colourways.png", copts, scene=params["scene"],
-                      colourways=DEFAULT_COLOURWAYS[:n], columns=min(n, 3))
-    return {"preview": "preview.png", "colourways": "colourways.png", "drjit_threads": threads or None}
+    got = preview(inputs["fit/model.kes.json"], out, params)
+    return {"preview": got.still.name, "colourways": got.colourways.name, "drjit_threads": threads or None}
 
 
 STEP_FUNCTIONS = {

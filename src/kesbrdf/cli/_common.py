@@ -35,7 +35,7 @@ def check_output(path, suffixes: tuple[str, ...] = (), flag: str = "-o", folder:
     """Check an output path before any long work starts; return it as a :class:`~pathlib.Path`.
 
     The one rule of every command's output (``-o``, ``--json``, ...; docs/decisions.md,
-    "Missing output folders"): kesbrdf creates the output and the one folder that holds
+    "Outputs and write errors"): kesbrdf creates the output and the one folder that holds
     it, never the folders above: ``-o out/m.kes.json`` creates ``out`` when it is
     missing, ``-o results/2026/m.kes.json`` with no ``results`` is an error naming
     ``results`` (a mistyped path must not grow a tree silently).

@@ -1,8 +1,11 @@
 """``kesbrdf demo``: the whole chain on the embedded sample, no input needed.
 
-images → values (ingest) → extended-KES model → validation → the paper's figures →
-HTML report → renders (sphere, draped garment, drape animation, colourways), each
-stage when its optional part is installed (``make demo`` installs them all).
+images → values (ingest) → model → validation → the paper's figures → HTML report →
+exports → renders (sphere, draped garment, drape animation, colourways), each stage
+when its optional part is installed (``make demo`` installs them all).  The steps are
+the pipeline's (:mod:`kesbrdf.pipeline`, docs/pipeline.md): the model is fitted ONCE,
+by the rule of ``kesbrdf fit``, saved as ``model.kes.json`` (any kind), and every later step
+reads that model; a step that cannot use it prints a one-line note and the rest runs.
 """
 
 from __future__ import annotations
@@ -17,9 +20,9 @@ from kesbrdf.cli._common import check_output, stderr
 HELP = "Run the full chain on the embedded sample: ingest, fit, validate, figures, report, renders."
 
 
-#: Frames of the garment drape: 2.2 s at 30 fps (settle 0.6 s, a 90° turn over 1.2 s,
-#: 0.4 s of swing); the clip starts at frame 17 (render.demo.CLIP_FIRST_FRAME): 49 frames.
-GARMENT_FRAMES = 66
+#: The garment drape is the showcase preview's (kesbrdf.render.showcase.PREVIEW: cloth
+#: resolution 40, 0.75 s of settling, a 180° turn, 5.25 s at 24 fps); the full clip is
+#: ``kesbrdf showcase``.
 
 
 def add_arguments(p):
@@ -80,118 +83,241 @@ class _Stages:
                                                         "total_cpu_s": round(cpu, 2)}, indent=1) + "\n")
 
 
+class _EarlyCluster:
+    """The batch step's local Dask cluster, started in a thread while the earlier steps run.
+
+    Starting two spawned worker processes (each importing numpy, scipy and kesbrdf) took
+    most of the batch step's wall time on a loaded machine, with the demo's own process
+    idle meanwhile; started at the beginning of the demo, the workers are up by the time
+    the batch step needs them.  A failure to start falls back to the batch's own cluster.
+    """
+
+    def __init__(self, workers: int = 2):
+        import threading
+
+        self.cluster = None
+        self.error = None
+
+        def start():
+            try:
+                from kesbrdf.batch.engine import start_local_cluster
+
+                self.cluster = start_local_cluster(workers)
+            except Exception as exc:  # pragma: no cover - reported, then the batch starts its own
+                self.error = exc
+
+        self.thread = threading.Thread(target=start, name="kesbrdf-demo-cluster", daemon=True)
+        self.thread.start()
+
+    def client(self):
+        """A client of the started cluster, or None (the batch then starts its own)."""
+        self.thread.join()
+        if self.cluster is None:
+            return None
+        from distributed import Client
+
+        return Client(self.cluster)
+
+    def close(self) -> None:
+        self.thread.join()
+        if self.cluster is not None:
+            self.cluster.close()
+
+
+def _simulate_demo_drapes(out: str) -> float:
+    """Both drapes of the demo (sheet, skirt), in a background process; returns its CPU s."""
+    from kesbrdf.cloth.drape import simulate_drape
+    from kesbrdf.render.showcase import PREVIEW
+
+    c0 = time.process_time()
+    simulate_drape("sphere", Path(out) / "drape", frames=SHEET_FRAMES)
+    simulate_drape("garment", Path(out) / "garment", frames=PREVIEW.sim_frames, overwrite=True,
+                   **PREVIEW.drape_kwargs())
+    return time.process_time() - c0
+
+
+#: Frames of the sheet falling onto the sphere (30 fps).
+SHEET_FRAMES = 40
+
+
+class _EarlyDrapes:
+    """The drapes, simulated in a spawned process from the start of the demo.
+
+    They need no model, and the steps before the renders leave a core idle (the fit is
+    single-threaded, the export looks wait on Blender and Chromium): on two cores the
+    simulation (about 40 s of CPU) then costs no wall time.  The render step waits for it
+    and calls :func:`~kesbrdf.cloth.drape.simulate_drape` again, which finds the finished
+    folders (or resumes them, should the background run have failed).
+    """
+
+    def __init__(self, out: Path):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        self.future = self.pool.submit(_simulate_demo_drapes, str(out))
+
+    def wait(self) -> tuple[float | None, str | None]:
+        """(CPU s of the background run or None, its error or None)."""
+        try:
+            return self.future.result(), None
+        except Exception as exc:  # resumed in-process by the caller
+            return None, f"{type(exc).__name__}: {exc}"
+        finally:
+            self.pool.shutdown()
+
+
+def _attempt(label: str, fn, notes: list, default=None):
+    """Run one consumer of the model; a failure is a one-line note, never a crash.
+
+    Every consumer (renders, exports, looks, figures, report, batch) reads the one model
+    the fit chose; one that cannot use it says so in one line and the rest still runs.
+    """
+    from kesbrdf.errors import KesbrdfError
+
+    try:
+        return fn()
+    except Exception as exc:  # noqa: BLE001 - the demo keeps going; the note says what failed
+        text = " ".join(str(exc).split()) or type(exc).__name__
+        if not isinstance(exc, (KesbrdfError, ImportError)):
+            text = f"{type(exc).__name__}: {text}"
+        note = f"{label} skipped: {text[:300]}"
+        stderr(f"    note: {note}")
+        notes.append(note)
+        return default
+
+
 def run(args) -> int:
-    import kesbrdf
-    from kesbrdf.measure import demo_data
-    from kesbrdf.validate.diagnostics import diagnose
+    from kesbrdf import pipeline
     from kesbrdf.io.measurement_csv import read_measurement, write_measurement
-    from kesbrdf.validate.compare import compare_reference, leave_one_orientation_out, validate
+    from kesbrdf.measure import demo_data
     from kesbrdf._atomic import write_bytes, write_text
 
     out = check_output(args.output, folder=True)
     out.mkdir(parents=True, exist_ok=True)
     say = _Stages()
+    notes: list[str] = []
+    batch_wanted = not args.quick and _have("distributed") and _have("kesbrdf.batch.demo")
+    cluster = _EarlyCluster() if batch_wanted else None
+    drapes = _EarlyDrapes(out) if not args.quick and _have("newton") and _have("mitsuba") else None
 
     # 1. acquire: images -> values when the image-based sample is available
     meas_path = out / "measurement.csv"
     manifest = demo_data.embedded_manifest()
     if manifest is not None:
-        from kesbrdf.measure.acquisition.ingest import ingest
-
         say(f"ingest: camera frames of {manifest.parent.name} -> calibrated reflectance")
-        result = ingest(manifest)
-        write_measurement(meas_path, result.measurement)
     else:
         say("acquire: embedded simulated measurement (virtual gonioreflectometer)")
-        write_bytes(meas_path, demo_data.embedded_measurement().read_bytes())
+    got = pipeline.ingest()
+    if got.source == "manifest":
+        write_measurement(meas_path, got.measurement)
+    else:
+        write_bytes(meas_path, got.raw)
     m = read_measurement(meas_path)
     reference = demo_data.embedded_reference()
 
-    # 2-3. interpolate + model
+    # 2-3. interpolate + model: ONE fit; every later step reads this model
     say(f"fit: {len(m)} samples, channels {', '.join(m.channels)}")
-    model, report = kesbrdf.fit(m)
+    fitted = pipeline.fit(m)
+    report = fitted.report
     stderr(f"    {report.summary()}")
     if report.comparison:
         stderr(f"    {report.comparison_summary()}")
     for w in report.warnings:
         stderr(f"    warning: {w}")
-    kes_model = model
-    if model.kind != "kes":
-        # the paper's figures, the renderer, the viewer and the exports read kes only
-        # (docs/models.md): they get the kes fit; the default is saved and judged beside it
-        model.save(out / f"model.{model.kind}.json")
-        kes_model = kesbrdf.fit(m, kind="kes")[0]
-        kes_model.diagnostics["fit_report"] = report.to_dict()
-        stderr(f"    default model saved as model.{model.kind}.json; figures, renders and exports use the kes fit "
-               "(model.kes.json), which they can read")
-    model_path = out / "model.kes.json"
-    kes_model.save(model_path)
+    # .kes.json is the model-file ending of every kind (docs/formats.md): a fixed name the
+    # docs' commands can use, whichever kind the fit chose
+    model_path = fitted.save(out / "model.kes.json")
+    stderr(f"    the model: {fitted.headline()}")
+    stderr(f"    saved as {model_path.name} (kind {fitted.kind}); the figures, report, renders, exports and "
+           "viewer all use it")
 
     # 4. validate
     say("validate: round trip, leave-one-orientation-out, reference + baselines, diagnostics")
+    validated = pipeline.validate(fitted, m, reference)
     summary = {
         "measurement": str(meas_path),
         "model": str(model_path),
-        "round_trip": validate(model, m),
-        "leave_one_orientation_out": leave_one_orientation_out(m),
-        "reference": compare_reference(m, reference) if reference is not None else None,
-        "diagnostics": diagnose(model),
+        "model_kind": fitted.kind,
+        "model_sha256": fitted.sha256,
+        "fit_report": fitted.selection(),
+        **validated.metrics(),
+        "diagnostics": validated.diagnostics,
     }
-    write_text(out / "validation.json", json.dumps(summary, indent=1) + "\n")
-    if summary["reference"]:
-        for base, cases in summary["reference"]["ratio_kes_to"].items():
-            text = ", ".join(f"{k}: {v:.2f}" for k, v in cases.items())
-            stderr(f"    RMSE ratio KES / {base}: {text}")
+    write_text(out / "validation.json", json.dumps(summary, indent=1, default=str) + "\n")
+    ratios = (summary.get("reference") or {}).get("ratio_kes_to") or {}
+    for base, cases in ratios.items():
+        text = ", ".join(f"{k}: {v:.2f}" for k, v in cases.items())
+        stderr(f"    RMSE ratio KES / {base}: {text}")
     prior_part, plan_result = {}, None
     if reference is not None:
         from kesbrdf.cli import _demo_prior
 
-        prior_part = _demo_prior.default_vs_baselines(m, reference, model, report, say)
+        prior_part = _demo_prior.default_vs_baselines(m, reference, fitted.model, report, say)
         summary["default_vs_baselines"] = {"headline": prior_part["headline"], "verdicts": prior_part["verdicts"],
                                            **prior_part["table"]}
-        write_text(out / "validation.json", json.dumps(summary, indent=1) + "\n")
+        write_text(out / "validation.json", json.dumps(summary, indent=1, default=str) + "\n")
         plan_result = _demo_prior.small_plan(reference, say)
 
-    comparisons = [] if args.quick else _comparisons(out, reference, say)
+    comparisons = [] if args.quick else _attempt("reference-vs-model renders",
+                                                 lambda: _comparisons(out, reference, say), notes, [])
     looks = None
     if not args.quick:
-        exported = _exports(out, kes_model, say)
-        looks = _looks(out, model_path, exported, say)
+        exported = _attempt("exports", lambda: _exports(out, fitted, say, notes), notes, {})
+        looks = _attempt("export looks", lambda: _looks(out, model_path, exported, say), notes)
 
     # figures + report
     if _have("matplotlib") and _have("kesbrdf.plotting.report"):
-        from kesbrdf.plotting import report as report_mod
+        from kesbrdf.pipeline import outputs
 
         say("figures + report")
-        report_mod.write_report(
-            out / "report.html",
-            kes_model,
-            measurement=m,
-            reference=reference,
+        prior_model = fitted.model if fitted.model.has_sigma else prior_part.get("prior_model")
+        inputs = outputs.report_inputs(
+            fitted, m, validated, reference,
             metrics=summary,
-            diagnostics=summary["diagnostics"],
             title="kesbrdf demo: virtual black satin",
             figure_dir=out / "figures",
             comparisons=comparisons,
             plan=plan_result,
             baselines=summary.get("default_vs_baselines"),
-            prior_model=model if model.kind == "fibre-prior" else prior_part.get("prior_model"),
+            prior_model=prior_model,
             looks=looks,
+            notes=list(notes),
         )
+        _attempt("figures + report", lambda: outputs.report(inputs, out / "report.html"), notes)
     else:
         say("figures + report skipped (install kesbrdf[plot])")
 
     if not args.quick:
-        _renders(out, model_path, say)
+        _attempt("renders", lambda: _renders(out, model_path, say, drapes), notes)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
-    if not args.quick and _have("distributed") and _have("kesbrdf.batch.demo"):
+    if batch_wanted:
         from kesbrdf.batch.demo import run_demo_batch
 
-        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster")
-        run_demo_batch(out / "batch", quick=args.quick, progress=say)
+        say("batch: 12 simulated fabrics (2 deliberately broken) on a local Dask cluster (started with the demo)")
+
+        def batch():
+            client = cluster.client()
+            try:
+                return run_demo_batch(out / "batch", quick=args.quick, progress=say, scheduler=client)
+            finally:
+                if client is not None:
+                    client.close()
+
+        try:
+            _attempt("batch", batch, notes)
+        finally:
+            cluster.close()
     say.summary(out)
+    write_text(out / "demo_notes.json", json.dumps({"model": str(model_path), "model_kind": fitted.kind,
+                                                     "model_sha256": fitted.sha256, "notes": notes}, indent=1) + "\n")
+    if notes:
+        stderr(f"{len(notes)} step(s) could not use the {fitted.kind} model (demo_notes.json):")
+        for n in notes:
+            stderr(f"  {n}")
     stderr(f"demo outputs in {out}/")
+    stderr(f"the model: {fitted.headline()}")
     stderr(f"open the interactive viewer on this model:  kesbrdf view {model_path}")
     return 0
 
@@ -204,32 +330,30 @@ def run(args) -> int:
 DEMO_FIT_GRID = ((6, 12), (10, 20))
 
 
-def _exports(out: Path, model, say) -> dict:
+def _exports(out: Path, fitted, say, notes: list) -> dict:
     """Every export format into out/exports/<format>/ (docs/exports.md), with where it opens.
 
-    Returns {format: main file} of the formats written."""
-    import inspect
-
+    The analytic fits (glTF, glb, MaterialX, USD) are computed once for the model and
+    kept beside the outputs (out/exports/analytic-fits/), so the formats share them and
+    a second run reuses them.  Returns {format: main file} of the formats written."""
     from kesbrdf._atomic import write_text
-    from kesbrdf.errors import KesbrdfError
-    from kesbrdf.export import export, format_module, format_names
+    from kesbrdf.pipeline import outputs
 
-    summary = {}
-    for fmt in format_names():
-        try:
-            module = format_module(fmt)
-            ext = (getattr(module, "EXTENSIONS", ()) or ("",))[0]
-            opts = {"fit_grid": DEMO_FIT_GRID} if "fit_grid" in inspect.signature(module.export).parameters else {}
-            result = export(model, fmt, out / "exports" / fmt / f"fabric{ext}", **opts)
-        except (ImportError, KesbrdfError) as exc:
-            say(f"export {fmt} skipped ({exc})")
-            continue
-        summary[fmt] = result.to_json()
-        size = result.size / 2**20
-        say(f"export {fmt}: {result.paths[0]} ({size:.1f} MiB); open with: {result.open_with}")
-    if summary:
+    def progress(fmt):
+        say(f"export {fmt}")
+
+    got = outputs.export(fitted, out / "exports", stem="fabric", options={"*": {"fit_grid": DEMO_FIT_GRID}},
+                         fit_cache_dir=out / "exports" / "analytic-fits", progress=progress)
+    for fmt, result in got.results.items():
+        stderr(f"    {fmt}: {result.paths[0]} ({result.size / 2**20:.1f} MiB); open with: {result.open_with}")
+    for fmt, reason in got.failed.items():
+        note = f"export {fmt} skipped: {reason}"
+        stderr(f"    note: {note}")
+        notes.append(note)
+    if got.results:
+        summary = {fmt: r.to_json() for fmt, r in got.results.items()}
         write_text(out / "exports" / "exports.json", json.dumps(summary, indent=1) + "\n")
-    return {fmt: Path(s["paths"][0]) for fmt, s in summary.items()}
+    return got.main_files()
 
 
 #: The exports whose look the demo measures, each in the renderer that reads it
@@ -276,7 +400,11 @@ def _comparisons(out: Path, reference, say) -> list:
     return results
 
 
-def _renders(out: Path, model_path: Path, say) -> None:
+def _renders(out: Path, model_path: Path, say, drapes: _EarlyDrapes | None = None) -> None:
+    if drapes is not None:
+        say("drape: waiting for the sheet and the skirt, simulated in a background process since the demo started")
+        cpu, error = drapes.wait()
+        stderr(f"    background drapes: {f'{cpu:.1f} s of CPU' if cpu is not None else f'failed ({error}), resumed here'}")
     if not (_have("mitsuba") and _have("kesbrdf.render.scenes")):
         say("renders skipped (install kesbrdf[render])")
         return
@@ -293,10 +421,12 @@ def _renders(out: Path, model_path: Path, say) -> None:
             return report
 
         say("drape: satin sheet onto a sphere (newton XPBD, 48x48)")
-        drape_dir = simulate_drape("sphere", out / "drape", frames=40, progress=frames("sheet"))
-        say("drape: six-gore skirt sewn from pattern panels on the turning mannequin (newton XPBD)")
-        garment_dir = simulate_drape("garment", out / "garment", frames=GARMENT_FRAMES, resolution=40,
-                                     turn_deg=90.0, turn_start_s=0.6, turn_duration_s=1.2, progress=frames("skirt"))
+        drape_dir = simulate_drape("sphere", out / "drape", frames=SHEET_FRAMES, progress=frames("sheet"))
+        from kesbrdf.render.showcase import PREVIEW
+
+        say("drape: six-gore skirt (bias-cut front) sewn from pattern panels on the mannequin turning 180° (newton XPBD)")
+        garment_dir = simulate_drape("garment", out / "garment", frames=PREVIEW.sim_frames, overwrite=True,
+                                     progress=frames("skirt"), **PREVIEW.drape_kwargs())
     else:
         say("drape skipped (install kesbrdf[cloth])")
     say("render: sphere, draped garment, animation, colourways (Mitsuba 3)")

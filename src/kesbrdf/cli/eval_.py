@@ -28,7 +28,7 @@ def run(args) -> int:
     from kesbrdf._atomic import write_text
     from kesbrdf.models.brdf import evaluate
     from kesbrdf.geometry import spherical_to_cartesian
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     check_output(args.output, (".csv",))
     model = load(args.model)

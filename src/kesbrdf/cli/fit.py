@@ -102,14 +102,10 @@ def run(args) -> int:
 
 
 def _describe(model, report) -> str:
-    d, p = model.diagnostics, model.parameters
-    if report.fitter == "scattered":
-        return (f"scattered fit of {report.rows_used} samples, warp at {p['warp_offset_deg']:.1f} deg "
-                f"({p.get('warp_offset_rule', 'given')}), symmetry {p.get('symmetry')}, body {model.body.tolist()}")
-    if model.kind == "kes-halfdiff":
-        return f"kes-halfdiff, table {tuple(model.table.shape)}, channels {', '.join(model.channels)}"
-    if model.kind == "kes":
-        return (f"{model.orientations} orientations, {len(model.gamma_nodes)} gamma nodes, "
-                f"channels {', '.join(model.channels)}; floored {len(d.get('floored', []))} half-sample(s), "
-                f"log fallback at {len(d.get('fallback_gamma_deg', []))} gamma value(s)")
-    return f"kind {model.kind}, channels {', '.join(model.channels)}"
+    """The model's own one line, and what the fit floored or fell back on (when recorded)."""
+    d = model.diagnostics if isinstance(model.diagnostics, dict) else {}
+    extra = ""
+    if "floored" in d or "fallback_gamma_deg" in d:
+        extra = (f"; floored {len(d.get('floored', []))} half-sample(s), "
+                 f"log fallback at {len(d.get('fallback_gamma_deg', []))} gamma value(s)")
+    return model.describe() + extra

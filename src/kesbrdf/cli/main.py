@@ -41,6 +41,7 @@ COMMANDS: dict[str, str] = {
     "compare-render": "compare_render",
     "view": "view",
     "demo": "demo",
+    "showcase": "showcase",
     "batch": "batch",
 }
 

@@ -43,7 +43,7 @@ def run(args) -> int:
         truths[name] = make_reference(name)
     for path in args.model:
         from kesbrdf.models.brdf import evaluate
-        from kesbrdf.models.kes import load
+        from kesbrdf.io.model_file import load_model as load
 
         model = load(path)
 

@@ -70,7 +70,7 @@ def _sha256(path) -> str:
 def load_inputs(args):
     """Model, measurement and reference named on the command line (shared with report)."""
     from kesbrdf.cli._common import make_reference
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     model = load(args.model)
     measurement = None

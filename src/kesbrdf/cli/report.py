@@ -26,7 +26,7 @@ def add_arguments(p):
 def run(args) -> int:
     from kesbrdf.cli.plot import load_inputs
     from kesbrdf.errors import KesbrdfError
-    from kesbrdf.plotting.report import collect, write_report
+    from kesbrdf.plotting.report import ReportInputs, collect, write_report
 
     out = Path(args.output)
     if out.suffix.lower() not in (".html", ".htm"):
@@ -43,7 +43,8 @@ def run(args) -> int:
     title = args.title or f"kesbrdf report: {sample}"
     stderr("drawing figures ...")
     options = {name: {"mapping": args.mapping} for name in ("3a", "3b", "4", "6")}
-    write_report(out, model, measurement=measurement, reference=reference, metrics=metrics,
-                 diagnostics=diagnostics, title=title, figure_dir=args.figures_dir, figure_options=options)
+    write_report(out, ReportInputs(model, measurement=measurement, reference=reference, metrics=metrics,
+                                   diagnostics=diagnostics, title=title, figure_dir=args.figures_dir,
+                                   figure_options=options))
     stderr(f"wrote {out}")
     return 0

@@ -20,7 +20,7 @@ def add_arguments(p):
 def run(args) -> int:
     from kesbrdf._atomic import write_text
     from kesbrdf.io.measurement_csv import read_measurement
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.validate.compare import validate
 
     if args.json_out:
@@ -35,7 +35,7 @@ def run(args) -> int:
 
     if has_uncertainty(model):
         wi, wr = m.wi, m.wr
-        warp = getattr(model, "sample_frame_warp", 0.0)
+        warp = model.sample_frame_warp
         if warp:  # fitted in a sample frame: evaluate as validate() does
             from kesbrdf.models.scattered import to_fabric_frame
 
@@ -49,7 +49,7 @@ def run(args) -> int:
                   f"median sigma of ln f {cov['median_sigma_log']:.3f} (on the samples the model was fitted to "
                   "this is a check, not a calibration: give validate held-out data to calibrate)")
     else:
-        print(f"uncertainty: none (kind {model.kind!r} carries no sigma; only fibre-prior models do)")
+        print(f"uncertainty: none (a {model.kind!r} model carries no sigma)")
     if args.json_out:
         write_text(args.json_out, json.dumps(result, indent=1) + "\n")
         stderr(f"wrote {args.json_out}")

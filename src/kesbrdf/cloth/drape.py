@@ -1,6 +1,6 @@
 """Dressing simulation: satin draped over a sphere or a dress form with newton (XPBD, CPU).
 
-The paper's application step (DESIGN §1.5) renders "arbitrarily coloured satin" in a
+The paper's application step (docs/method.md, "The paper's steps") renders "arbitrarily coloured satin" in a
 dressing simulation.  :func:`simulate_drape` runs the cloth with the ``newton`` package's
 :class:`newton.solvers.SolverXPBD` on Warp's CPU device and writes a folder that
 ``kesbrdf render --animation`` reads (layout in ``docs/drape.md``)::
@@ -18,7 +18,7 @@ E·t (``stretch_stiffness``, N/m) along warp and weft and ``shear_ratio``·E·t 
 the diagonals; bending is newton's dihedral constraint with stiffness 3·B/h² for a
 bending rigidity B (N·m) and cell size h.  newton's XPBD sums constraint corrections
 Jacobi-style, which diverges when a particle's summed ``k·dt²/m`` is too large
-(the "too small particle mass made XPBD explode" of DESIGN §7).  The substep is
+(the "too small particle mass made XPBD explode" of docs/architecture.md, "Tools it runs on").  The substep is
 therefore chosen from the stability number
 
 .. math::  \\Delta t = \\sqrt{\\beta / \\max_i (\\textstyle\\sum_{s \\ni i} k_s / m_i)}

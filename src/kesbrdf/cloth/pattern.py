@@ -19,6 +19,13 @@ The garment is cut as a tailor would cut it (docs/drape.md, "Pattern panels"):
   ``kesbrdf`` BSDF's x axis (warp, ∂p/∂u) runs along each gore's own grain line, so the
   warp of neighbouring gores meets at an angle at every seam, as in a real gored skirt.
   ∂p/∂u × ∂p/∂v points out of the garment.
+* **Bias cut.** The gores in ``bias_gores`` (default: the centre front) are cut on the
+  bias: their grain line runs at 45° to the gore's centre line.  Their UVs are the
+  straight-grain ones turned by +45° in pattern space, u' = (u + v)/√2,
+  v' = (v − u)/√2 (a rotation, so ∂p/∂u' × ∂p/∂v' still points out and the BSDF's warp
+  follows the bias grain), and their springs are assembled with the threads along the
+  cell diagonals (:func:`kesbrdf.cloth.grid.grid_piece` with ``bias=True``): the panel
+  is compliant down its length and drapes in softer, rounder folds than its neighbours.
 * **Placement.** Row y of every gore is laid on one horizontal ellipse around the body
   (the body's cross-section at that height, grown until its perimeter is C(y) plus one
   seam gap per seam), gore k centred on the arc at k/gores of the way round from the
@@ -43,11 +50,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from kesbrdf.cloth import mannequin as _mannequin
+from kesbrdf.cloth.grid import ClothPiece, grid_piece
 
 __all__ = ["SkirtPattern", "SEAM_GAP", "circumference", "gore_outline", "gored_skirt"]
 
 #: Distance the stitches hold the two edges of a seam apart [m] (the stitch line).
 SEAM_GAP = 0.002
+#: Stiffness of the taped seams of a bias-cut gore, as a multiple of a plain stitch's
+#: (E·t): with plain stitches the bias gore's seams opened to 4.4 mm during the turn at
+#: resolution 16 (the tolerance is 4 mm, tests/cloth/test_garment.py).
+BIAS_SEAM_FACTOR = 2.0
 #: Clearance of the placed skirt from the body at the waist and at the hips [m].
 WAIST_CLEARANCE = 0.005
 
@@ -63,6 +75,7 @@ class SkirtPattern:
     hem_circumference : circumference of the hem (flare).
     hang_flare : fraction of the flare (girth beyond the hip's) kept in the mean girth of
         the placed skirt; the rest is laid in flutes, one per gore.
+    bias_gores : gores cut on the bias (grain at 45°); gore 0 is the centre front.
     """
 
     gores: int = 6
@@ -71,6 +84,7 @@ class SkirtPattern:
     hip_ease: float = 0.06
     hem_circumference: float = 2.2
     hang_flare: float = 0.45
+    bias_gores: tuple[int, ...] = (0,)
 
 
 def _body_ellipse(z, grow=0.0):
@@ -165,22 +179,27 @@ def _arc_points(a, b, c, s_query, amp=None, waves: int = 6, samples: int = 4096)
 
 def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: float,
                 pattern: SkirtPattern = SkirtPattern()):
-    """The sewn skirt as one :class:`~kesbrdf.cloth.scenes.ClothPiece` (z up, waist at 1 m).
+    """The sewn skirt as one :class:`~kesbrdf.cloth.grid.ClothPiece` (z up, waist at 1 m).
 
     ``rows`` cells down each gore, ``cols`` across.  The waist row is pinned.  Extra
     fields on the piece: ``spring_rest`` (pattern rest lengths of the springs, seams
     included), ``flat_rest`` (bending rest angle 0), ``radius_scale`` (per-vertex
     contact radius factor: SEAM_GAP/2 over the default for seam vertices, as a length
-    [m] in ``seam_radius``), ``seams`` (P, 2) stitched vertex pairs, ``panels``.
+    [m] in ``seam_radius``), ``seams`` (P, 2) stitched vertex pairs, ``panels``,
+    ``bias_gores``.
     """
-    from kesbrdf.cloth import scenes as _scenes
-
     n = pattern.gores
+    bad = [g for g in pattern.bias_gores if not 0 <= int(g) < n]
+    if bad:
+        raise ValueError(f"pattern: expected bias gores in [0, {n - 1}], got {bad}")
     x, y = gore_outline(pattern, rows, cols)
     n_i, n_j = x.shape
     flat = np.stack([x, y, np.zeros_like(x)], -1)
     uv = np.stack([y, x + float(np.max(np.abs(x)))], -1)  # u down the grain line, v across
-    gore = _scenes._grid(flat, uv, False, density, stretch, shear)
+    straight = grid_piece(flat, uv, False, density, stretch, shear)
+    r = np.sqrt(0.5)
+    uv_bias = np.stack([r * (uv[..., 0] + uv[..., 1]), r * (uv[..., 1] - uv[..., 0])], -1)  # grain turned +45°
+    bias = grid_piece(flat, uv_bias, False, density, stretch, shear, bias=True)
 
     # placement: rows on ellipses around the body, nearly isometric down the meridian;
     # below the hip line the flare is laid in flutes (one per gore, crest at its centre)
@@ -202,7 +221,10 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
 
     n_per = n_i * n_j
     positions, faces, springs, ke, rest = [], [], [], [], []
+    uvs = []
     for k in range(n):
+        gore = bias if k in pattern.bias_gores else straight
+        uvs.append(gore.uv_rest)
         s_query = k * perim[:, None] / n + x  # pattern x -> arc length on the row's ellipse
         xy = _arc_points(A, B, c0, s_query, amp, n)
         positions.append(np.concatenate([xy, np.broadcast_to(z[:, None, None], (n_i, n_j, 1))], -1).reshape(-1, 3))
@@ -214,17 +236,22 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
     idx = np.arange(n_per).reshape(n_i, n_j)
     right, left = idx[:, -1], idx[:, 0]
     seams = np.concatenate([np.stack([k * n_per + right, ((k + 1) % n) * n_per + left], -1) for k in range(n)])
-    # a stitch is as stiff as the fabric across one cell (E·t)
+    # a stitch is as stiff as the fabric across one cell (E·t); the seams of a bias-cut
+    # gore are taped (stay-stitched), as a tailor tapes a bias edge so that it does not
+    # stretch out: BIAS_SEAM_FACTOR × E·t
     seam_ke = np.full(len(seams), float(stretch))
+    gore_of = seams // n_per
+    on_bias = np.isin(gore_of[:, 0], pattern.bias_gores) | np.isin(gore_of[:, 1], pattern.bias_gores)
+    seam_ke[on_bias] *= BIAS_SEAM_FACTOR
     springs.append(seams)
     ke.append(seam_ke)
     rest.append(np.full(len(seams), SEAM_GAP))
 
     N = n * n_per
-    piece = _scenes.ClothPiece(
+    piece = ClothPiece(
         shape=(n_i, n_j), positions=np.concatenate(positions).astype(np.float32),
-        faces=np.concatenate(faces).astype(np.int32), uv_rest=np.tile(gore.uv_rest, (n, 1)),
-        masses=np.tile(gore.masses, n), springs=np.concatenate(springs).astype(np.int32),
+        faces=np.concatenate(faces).astype(np.int32), uv_rest=np.concatenate(uvs),
+        masses=np.tile(straight.masses, n), springs=np.concatenate(springs).astype(np.int32),
         spring_ke=np.concatenate(ke), min_spring_length=float(np.min(np.concatenate(rest[:-1]))),
         pinned=np.zeros(N, bool), closed=False,
     )
@@ -234,6 +261,7 @@ def gored_skirt(rows: int, cols: int, density: float, stretch: float, shear: flo
     piece.seams = seams.astype(np.int32)
     piece.seam_radius = SEAM_GAP / 2
     piece.panels = n
+    piece.bias_gores = tuple(int(g) for g in pattern.bias_gores)
     # render mesh: the panels plus a two-triangle strip per row across every seam
     ri, li = seams[:, 0].reshape(n, n_i), seams[:, 1].reshape(n, n_i)
     a_, b_, c_, d_ = ri[:, :-1], ri[:, 1:], li[:, 1:], li[:, :-1]  # a: right edge row r, b: row r+1

@@ -19,9 +19,15 @@ faces are wound so that ``∂p/∂u × ∂p/∂v`` points along the face normal.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
+
+from kesbrdf.cloth import pattern as _pattern
+from kesbrdf.cloth.grid import ClothPiece, grid_piece
+
+#: The grid assembler under its former name (kept for callers of ``scenes._grid``).
+_grid = grid_piece
 
 __all__ = ["Collider", "ClothPiece", "SceneSpec", "sheet", "skirt", "sphere_scene", "dressform_scene",
            "garment_scene", "collider_mesh", "signed_distance"]
@@ -62,113 +68,11 @@ class Collider:
 
 
 @dataclass
-class ClothPiece:
-    """A cloth grid: rest positions, triangles, UVs, springs, pinned vertices.
-
-    positions : (n_i * n_j, 3) rest = initial positions [m], row-major in (i, j).
-    faces : (M, 3) int32 simulation triangles (periodic in j when ``closed``).
-    masses : (N,) lumped particle masses [kg] (a quarter of each incident cell).
-    springs : (S, 2) int32 particle pairs; spring_ke (S,) stiffness [N/m].
-    pinned : (N,) bool, vertices held in place (kinematic).
-    closed : the weft wraps around (a tube); output duplicates the seam column.
-    """
-
-    shape: tuple[int, int]
-    positions: np.ndarray
-    faces: np.ndarray
-    uv_rest: np.ndarray
-    masses: np.ndarray
-    springs: np.ndarray
-    spring_ke: np.ndarray
-    min_spring_length: float
-    pinned: np.ndarray
-    closed: bool = False
-    output_index: np.ndarray = field(default=None)  # (n_out,) simulation vertex of each output vertex
-    output_uv: np.ndarray = field(default=None)
-    output_faces: np.ndarray = field(default=None)
-    # sewn garments (kesbrdf.cloth.pattern): rest lengths from the flat pattern, flat
-    # bending rest angles, stitched vertex pairs and their contact radius [m]
-    spring_rest: np.ndarray | None = None
-    flat_rest: bool = False
-    seams: np.ndarray | None = None
-    seam_radius: float | None = None
-    panels: int = 1
-    clearance: dict | None = None
-
-
-@dataclass
 class SceneSpec:
     name: str
     cloth: ClothPiece
     colliders: list[Collider]
     ground_height: float = 0.0
-
-
-def _grid(points: np.ndarray, uv: np.ndarray, closed: bool, density: float, stretch: float, shear: float) -> ClothPiece:
-    """Faces, lumped masses and springs of an (n_i, n_j) grid of rest points."""
-    n_i, n_j = points.shape[:2]
-    idx = np.arange(n_i * n_j).reshape(n_i, n_j)
-    cells_j = n_j if closed else n_j - 1
-    ii, jj = np.meshgrid(np.arange(n_i - 1), np.arange(cells_j), indexing="ij")
-    a = idx[ii, jj]
-    b = idx[ii + 1, jj]
-    c = idx[ii + 1, (jj + 1) % n_j]
-    d = idx[ii, (jj + 1) % n_j]
-    # alternate the diagonal (no preferred shear direction); winding: du x dv = normal
-    even = ((ii + jj) % 2 == 0)[..., None]
-    t1 = np.where(even, np.stack([a, b, c], -1), np.stack([a, b, d], -1))
-    t2 = np.where(even, np.stack([a, c, d], -1), np.stack([b, c, d], -1))
-    faces = np.concatenate([t1.reshape(-1, 3), t2.reshape(-1, 3)]).astype(np.int32)
-
-    p = points.reshape(-1, 3).astype(np.float64)
-    A = np.linalg.norm(np.cross(p[b] - p[a], p[d] - p[a]), axis=-1)  # cell area (parallelogram)
-    masses = np.zeros(n_i * n_j)
-    for corner in (a, b, c, d):
-        np.add.at(masses, corner.ravel(), density * A.ravel() / 4.0)
-
-    # springs assembled cell by cell: an edge of length L in a cell of area A gets
-    # k = E_t * A / (2 L^2) from that cell (interior edges are shared by two cells, so
-    # a square interior cell edge ends up with k = E_t); each diagonal k = s E_t A / L^2
-    ke: dict[tuple[int, int], float] = {}
-
-    def add(i0, i1, coeff):
-        L2 = np.sum((p[i1] - p[i0]) ** 2, axis=-1)
-        for x, y, k in zip(i0.ravel(), i1.ravel(), (coeff * A / L2).ravel()):
-            key = (x, y) if x < y else (y, x)
-            ke[key] = ke.get(key, 0.0) + float(k)
-
-    for e0, e1 in ((a, b), (b, c), (c, d), (d, a)):
-        add(e0, e1, 0.5 * stretch)
-    if shear > 0:
-        add(a, c, shear * stretch)
-        add(b, d, shear * stretch)
-    springs = np.array(list(ke.keys()), dtype=np.int32)
-    spring_ke = np.array(list(ke.values()))
-    lengths = np.linalg.norm(p[springs[:, 0]] - p[springs[:, 1]], axis=-1)
-
-    piece = ClothPiece(
-        shape=(n_i, n_j), positions=p.astype(np.float32), faces=faces, uv_rest=uv.reshape(-1, 2),
-        masses=masses, springs=springs, spring_ke=spring_ke, min_spring_length=float(lengths.min()),
-        pinned=np.zeros(n_i * n_j, bool), closed=closed,
-    )
-    if closed:  # duplicate the seam column so v can run 0 .. circumference
-        out_idx = np.concatenate([idx, idx[:, :1]], axis=1)
-        seam = uv[:, :1].copy()
-        seam[:, 0, 1] = 2 * uv[:, -1, 1] - uv[:, -2, 1]  # one more weft step past the last column
-        out_uv = np.concatenate([uv, seam], axis=1)
-        o = np.arange(n_i * (n_j + 1)).reshape(n_i, n_j + 1)
-        oi, oj = np.meshgrid(np.arange(n_i - 1), np.arange(n_j), indexing="ij")
-        oa, ob, oc, od = o[oi, oj], o[oi + 1, oj], o[oi + 1, oj + 1], o[oi, oj + 1]
-        t1 = np.where(even, np.stack([oa, ob, oc], -1), np.stack([oa, ob, od], -1))
-        t2 = np.where(even, np.stack([oa, oc, od], -1), np.stack([ob, oc, od], -1))
-        piece.output_index = out_idx.ravel()
-        piece.output_uv = out_uv.reshape(-1, 2).astype(np.float32)
-        piece.output_faces = np.concatenate([t1.reshape(-1, 3), t2.reshape(-1, 3)]).astype(np.int32)
-    else:
-        piece.output_index = np.arange(n_i * n_j)
-        piece.output_uv = piece.uv_rest.astype(np.float32)
-        piece.output_faces = faces
-    return piece
 
 
 def sheet(n: int, size: float, height: float, density: float, stretch: float, shear: float) -> ClothPiece:
@@ -248,8 +152,6 @@ def garment_scene(resolution: int, density: float, stretch: float, shear: float)
     ``resolution`` 48 gives 24 rows down and 8 cells across each gore (``resolution // 2``
     and ``max(resolution // 6, 3)``).
     """
-    from kesbrdf.cloth import pattern as _pattern
-
     cloth = _pattern.gored_skirt(max(resolution // 2, 4), max(resolution // 4, 3), density, stretch, shear)
     body = Collider("mesh", (0.0, 0.0, 0.0), label="mannequin", moves=True)
     return SceneSpec("garment", cloth, [body, *MANNEQUIN_STAND])

@@ -4,7 +4,8 @@ A format is a module (named in ``FORMATS``) providing
 
 ``export(model, out, **options) -> ExportResult``
     Write the file(s) for ``model`` at ``out`` atomically (:mod:`kesbrdf._atomic`) and say
-    what was written and how well it agrees with the model.
+    what was written and how well it agrees with the model.  Anything else (a dict, None)
+    is refused with a one-line :class:`~kesbrdf.errors.ExportError`.
 ``EXTENSIONS`` (tuple of str, optional)
     The file name endings ``out`` may have (``(".bsdf",)``); checked *before* any work.
 ``HELP`` (str, optional)
@@ -25,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from kesbrdf.errors import ExportError
+from kesbrdf.export.registry import FORMATS
 
 __all__ = ["ExportResult", "export", "format_module", "format_names", "check_output", "check_values",
            "VALUE_MAX"]
@@ -81,28 +83,12 @@ def _jsonable(v):
     return json.loads(json.dumps(v, default=lambda o: o.tolist() if hasattr(o, "tolist") else str(o)))
 
 
-def _result_from_dict(fmt: str, d: dict) -> ExportResult:
-    """A format that reports with a plain dict: its numbers become ``agreement``."""
-    keys = ("format", "paths", "size", "open_with", "notes")
-    return ExportResult(
-        format=d.get("format", fmt),
-        paths=[Path(p) for p in d.get("paths", [])],
-        agreement=_jsonable({k: v for k, v in d.items() if k not in keys}),
-        notes=[str(n) for n in d.get("notes", [])],
-        open_with=str(d.get("open_with", "")),
-    )
-
-
 def format_names() -> tuple[str, ...]:
-    from kesbrdf.export import FORMATS
-
     return tuple(FORMATS)
 
 
 def format_module(fmt: str):
     """The module implementing format ``fmt``; a one-line error naming the known formats."""
-    from kesbrdf.export import FORMATS
-
     if not isinstance(fmt, str) or fmt not in FORMATS:
         known = ", ".join(map(repr, FORMATS)) or "(none installed)"
         raise ExportError(f"expected an export format, one of {known}; got {fmt!r}")
@@ -149,7 +135,7 @@ def _load_model(model):
         path = Path(model)
         if not path.is_file():
             raise FileNotFoundError(2, "No such file or directory", str(path))
-        from kesbrdf.models.kes import load
+        from kesbrdf.io.model_file import load_model as load
 
         return load(path)
     return model
@@ -228,13 +214,11 @@ def export(model, fmt: str, out, **options) -> ExportResult:
     model = _load_model(model)
     check_values(model, fmt, module, source)
     result = module.export(model, out, **options)
-    if not isinstance(result, ExportResult) and hasattr(result, "to_json"):
-        result = result.to_json()
-    if isinstance(result, dict):
-        result = _result_from_dict(fmt, result)
-    if not isinstance(result, ExportResult):
-        raise RuntimeError(f"export format {fmt!r} returned {type(result).__name__}, not ExportResult")
+    if not isinstance(result, ExportResult):  # the one contract of a format module
+        raise ExportError(f"{fmt}: expected the format's export() to return an ExportResult, "
+                          f"got {type(result).__name__} (from {module.__name__})")
     result.format = result.format or fmt
     result.paths = [Path(p) for p in (result.paths or [out])]
+    result.agreement = _jsonable(result.agreement)
     result.size = sum(p.stat().st_size for p in result.paths if p.is_file())
     return result

@@ -458,7 +458,7 @@ def _one_blas_thread():
 
     The trust-region solver and LSMR do thousands of dot products of ~10⁵ numbers;
     OpenBLAS threads only add synchronisation there, and on a loaded machine they
-    doubled the fits' CPU time (measured: 6.9 s → 3.2 s for one OpenPBR fit).
+    doubled the fits' CPU time.
     """
     try:
         from threadpoolctl import threadpool_limits

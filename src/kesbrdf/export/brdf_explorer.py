@@ -15,7 +15,7 @@ lit-sphere views show the model, not a fit.
 
 Parameters exposed in BRDF Explorer: ``bool halfvector`` (mapping; default: the
 model's ``deviation``), ``float scale`` (multiplies f_r, default 1), ``color tint``
-(multiplies the body term c, default white: a colourway, DESIGN §5).
+(multiplies the body term c, default white: a colourway, docs/method.md, "Colour").
 
 Constant-array size.  BRDF Explorer has no texture slot for an analytic BRDF, and
 GLSL drivers compile very large constant arrays slowly or not at all, so the table is
@@ -37,9 +37,14 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.export._framework import ExportResult
 from kesbrdf.models.mappings import BOUNDED_LAMBDA, EXTRAPOLATIONS, FADE_DEG, NORMALISATIONS
 
-__all__ = ["export", "brdf_explorer_source", "resample_table", "lobe_parameters", "glsl_function", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
+__all__ = ["export", "brdf_explorer_source", "resample_table", "lobe_parameters", "glsl_function", "KES_GLSL", "BRDF_EXPLORER_HEADER", "MAX_TABLE_ENTRIES", "OPEN_WITH"]
+
+#: The model's evaluation in GLSL, the one copy shared with the browser viewer
+#: (``src/kesbrdf/shaders/kes_brdf.glsl``): this export puts its constant arrays before it.
+KES_GLSL = (Path(__file__).resolve().parents[1] / "shaders" / "kes_brdf.glsl").read_text(encoding="utf-8")
 
 #: Largest baked table: entries per channel.  Each channel is its own ``const float``
 #: array: ANGLE (Chromium's WebGL) rejects a private variable over 64 KiB ("Size of
@@ -80,12 +85,6 @@ void main()
     fragColor = vec4(b * brightness, 1.0);
 }
 """
-
-
-def _check_model(model):
-    kind = getattr(model, "kind", "kes")
-    if kind != "kes" or not hasattr(model, "table"):
-        raise KesbrdfError(f"brdf-explorer export: expected a 'kes' model (phi, gamma table), got kind {kind!r}")
 
 
 def resample_table(model, n_phi: int, n_gamma: int):
@@ -170,75 +169,45 @@ def glsl_function(table, d_gamma: float, body, *, normalisation: str, extrapolat
         return f"const float KES_Q{c}[{n}] = float[{n}](\n{rows}\n);"
     b = [_f(v) for v in body]
     return f"""// kesbrdf extended-KES model (docs/formats.md "How to evaluate a model"), baked
-const int KES_NPHI = {n_phi};
-const int KES_NGAMMA = {n_gamma};
-const float KES_DGAMMA = {_f(d_gamma)};
-const float KES_TWO_PI = 6.283185307179586;
+const int kesNPhi = {n_phi};
+const int kesNGamma = {n_gamma};
+const float kesDGamma = {_f(d_gamma)};
 const vec3 KES_BODY = vec3({b[0]}, {b[1]}, {b[2]});
-// foreshortening weight w = max(sqrt(cos_i cos_r), KES_LAMBDA * max(cos_i, cos_r)): normalisation "{normalisation}"
-const float KES_LAMBDA = {_f(lam)};
-// lobe factor clamp(1 - (gamma - KES_GAMMA_MAX) * KES_FADE_SLOPE, 0, 1): extrapolation "{extrapolation}"
-const float KES_GAMMA_MAX = {_f(gamma_max)};
-const float KES_FADE_SLOPE = {_f(slope)};
-// q(phi_i, gamma_j) of channel c at KES_Qc[i * KES_NGAMMA + j], phi_i = i*2pi/KES_NPHI, gamma_j = j*KES_DGAMMA
+// the parameters: colour tint on the body term, mapping 0 deviation / 1 halfvector
+#define kesBody (KES_BODY * tint)
+#define kesMapping (halfvector ? 1 : 0)
+// foreshortening weight w = max(sqrt(cos_i cos_r), kesLambda * max(cos_i, cos_r)): normalisation "{normalisation}"
+const float kesLambda = {_f(lam)};
+// lobe factor clamp(1 - (gamma - kesGammaMax) * kesFadeSlope, 0, 1): extrapolation "{extrapolation}"
+const float kesGammaMax = {_f(gamma_max)};
+const float kesFadeSlope = {_f(slope)};
+const float kesLineSum = {_f(math.pi / 2)};  // unused: the paper mapping is not exported
+// q(phi_i, gamma_j) of channel c at KES_Qc[i * kesNGamma + j], phi_i = i*2pi/kesNPhi, gamma_j = j*kesDGamma
 {array(0)}
 {array(1)}
 {array(2)}
 
 vec3 kesFetch(int i, int j)
 {{
-    int k = i * KES_NGAMMA + j;
+    int k = i * kesNGamma + j;
     return vec3(KES_Q0[k], KES_Q1[k], KES_Q2[k]);
 }}
 
-// bilinear lookup: periodic in phi, clamped in gamma
-vec3 kesLookup(float phi, float gam)
-{{
-    float u = mod(phi, KES_TWO_PI) / KES_TWO_PI * float(KES_NPHI);
-    float u0 = floor(u);
-    float fu = u - u0;
-    int i0 = int(u0) % KES_NPHI;
-    int i1 = (i0 + 1) % KES_NPHI;
-    float v = clamp(gam / KES_DGAMMA, 0.0, float(KES_NGAMMA - 1));
-    float v0 = floor(v);
-    float fv = v - v0;
-    int j0 = min(int(v0), KES_NGAMMA - 1);
-    int j1 = min(j0 + 1, KES_NGAMMA - 1);
-    vec3 a = mix(kesFetch(i0, j0), kesFetch(i0, j1), fv);
-    vec3 b = mix(kesFetch(i1, j0), kesFetch(i1, j1), fv);
-    return mix(a, b, fu);
-}}
-
+{KES_GLSL}
 // L to the light, V to the viewer, N normal, X warp, Y weft (BRDF Explorer's frame)
 vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)
 {{
     vec3 wi = vec3(dot(L, X), dot(L, Y), dot(L, N));
     vec3 wr = vec3(dot(V, X), dot(V, Y), dot(V, N));
-    if (wi.z <= 0.0 || wr.z <= 0.0) return vec3(0.0);
-    float gam;
-    vec2 s;
-    if (halfvector) {{
-        vec3 h = normalize(wi + wr);
-        gam = 2.0 * atan(length(h.xy), h.z);
-        s = h.xy;
-    }} else {{
-        vec3 m = vec3(-wi.xy, wi.z);
-        gam = atan(length(cross(wr, m)), dot(wr, m));
-        s = wi.xy + wr.xy;
-    }}
-    // at the mirror direction the deviation has no azimuth: the plane of incidence
-    if (length(s) < 1e-12) s = wr.xy - wi.xy;
-    float phi = atan(s.y, s.x);
-    float w = max(sqrt(wi.z * wr.z), KES_LAMBDA * max(wi.z, wr.z));
-    float fade = clamp(1.0 - (gam - KES_GAMMA_MAX) * KES_FADE_SLOPE, 0.0, 1.0);
-    return scale * (KES_BODY * tint + kesLookup(phi, gam) * (fade / w));
+    return scale * kesBRDF(wi, wr);
 }}
 """
 
 
 def brdf_explorer_source(model, n_phi: int | None = None, n_gamma: int | None = None) -> tuple[str, dict]:
-    """Text of the ``.brdf`` file and a description of the baked table."""
-    _check_model(model)
+    """Text of the ``.brdf`` file and a description of the baked table (``model.table_view()``:
+    the (φ, γ) table, or the tabulated view of a kind without one)."""
+    model = model.table_view()
     d_phi, d_gamma_n = _default_grid(model)
     n_phi = int(n_phi or d_phi)
     n_gamma = int(n_gamma or d_gamma_n)
@@ -352,29 +321,34 @@ EXTENSIONS = (".brdf",)
 HELP = 'Disney BRDF Explorer analytic .brdf whose GLSL evaluates the KES table itself (not a fit)'
 
 
-def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) -> dict:
+def export(model, out, *, n_phi: int | None = None, n_gamma: int | None = None) -> ExportResult:
     """Write ``model`` as a BRDF Explorer analytic ``.brdf`` file.
 
     Returns
     -------
-    dict
-        ``paths``, ``size``, ``table`` (baked grid), ``downsampling_error`` (relative f_r
-        error of the baked table against the model), ``open_with``.
+    ExportResult
+        ``agreement``: ``table`` (baked grid), ``downsampling_error`` (relative f_r error
+        of the baked table against the model), ``exact``.
     """
     out = Path(out)
     if out.suffix.lower() != ".brdf":
         raise KesbrdfError(f"brdf-explorer export: expected an output ending in .brdf, got {out.name!r}")
+    if not callable(getattr(model, "table_view", None)):
+        raise KesbrdfError(f"brdf-explorer export: expected a 'kes' model or a model of any kind (its (phi, gamma) "
+                           f"table view), got {type(model).__name__}")
+    notes = [] if model.has_table else [
+        f"the GLSL evaluates the (phi, gamma) table tabulated from the {model.kind!r} model "
+        "(kesbrdf.models.table.tabulate), exact on the paper's incidence line"]
+    model = model.table_view()
     text, info = brdf_explorer_source(model, n_phi, n_gamma)
     err = downsampling_error(model, info["n_phi"], info["n_gamma"])
     with atomic_path(out) as tmp:
         tmp.write_text(text)
-    return {
-        "format": "brdf-explorer",
-        "paths": [str(out)],
-        "size": out.stat().st_size,
+    agreement = {
         "table": info,
         "downsampling_error": err,
         "fit_error": None,
         "exact": info["n_phi"] == model.phi_grid.size and info["n_gamma"] == model.gamma_grid.size,
-        "open_with": OPEN_WITH,
     }
+    return ExportResult("brdf-explorer", [out], size=out.stat().st_size, agreement=agreement, notes=notes,
+                        open_with=OPEN_WITH)

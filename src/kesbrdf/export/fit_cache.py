@@ -9,7 +9,9 @@ first:
 - **on disk**, one small JSON file per fit in :func:`cache_dir` (``analytic-fits/``
   under ``$KESBRDF_CACHE_DIR``, else ``$XDG_CACHE_HOME/kesbrdf``, else
   ``~/.cache/kesbrdf``), so separate ``kesbrdf export`` runs share it too.
-  ``KESBRDF_CACHE_DIR=off`` turns the disk cache off.
+  ``KESBRDF_CACHE_DIR=off`` turns the disk cache off.  :func:`cache_in` points it at
+  another folder for a block of code: the pipeline's export step keeps the fits beside
+  its outputs (``out/exports/analytic-fits/`` in the demo).
 
 The key is the SHA-256 of the model's content (kind, channels, parameters and arrays:
 :func:`model_digest`, the same for a model and the file it was saved to and loaded
@@ -22,6 +24,7 @@ written atomically (:mod:`kesbrdf._atomic`).
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -29,7 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["FIT_VERSION", "CACHE_ENV", "cache_dir", "model_digest", "fit_key", "lookup", "store", "clear_memory"]
+__all__ = ["FIT_VERSION", "CACHE_ENV", "cache_dir", "cache_in", "model_digest", "fit_key", "lookup", "store",
+           "clear_memory"]
 
 #: Part of every key: bump when the objective, the grids' meaning or a material changes.
 FIT_VERSION = "image-space-4"
@@ -39,10 +43,25 @@ CACHE_ENV = "KESBRDF_CACHE_DIR"
 MEMORY_SIZE = 32
 
 _MEMORY: dict[str, dict] = {}
+#: Folder set by :func:`cache_in` (innermost first), before the environment's.
+_OVERRIDE: list[Path] = []
+
+
+@contextlib.contextmanager
+def cache_in(folder):
+    """Keep the on-disk fits in ``folder`` (itself, not a subfolder) inside this block."""
+    _OVERRIDE.append(Path(folder))
+    try:
+        yield Path(folder)
+    finally:
+        _OVERRIDE.pop()
 
 
 def cache_dir() -> Path | None:
-    """The folder of the on-disk fit cache, or None when it is turned off."""
+    """The folder of the on-disk fit cache (:func:`cache_in`'s, else the environment's),
+    or None when it is turned off."""
+    if _OVERRIDE:
+        return _OVERRIDE[-1]
     value = os.environ.get(CACHE_ENV)
     if value is not None and value.strip().lower() in ("off", "0", "none", "false"):
         return None
@@ -64,27 +83,10 @@ def _json_default(o):
 
 
 def model_digest(target) -> str | None:
-    """SHA-256 of a model's content (kind, channels, parameters, payload); None without one."""
-    to_payload = getattr(target, "to_payload", None)
-    if to_payload is None:
-        return None
-    try:
-        fields, arrays = to_payload()
-    except NotImplementedError:
-        return None
-    h = hashlib.sha256()
-    head = {
-        "kind": getattr(target, "kind", type(target).__name__),
-        "channels": list(getattr(target, "channels", ())),
-        "parameters": getattr(target, "parameters", {}),
-        "fields": fields,
-    }
-    h.update(json.dumps(head, sort_keys=True, default=_json_default).encode())
-    for name in sorted(arrays):
-        a = np.ascontiguousarray(arrays[name])
-        h.update(f"{name}:{a.dtype.str}:{a.shape}".encode())
-        h.update(a.tobytes())
-    return h.hexdigest()
+    """SHA-256 of a model's content (:func:`kesbrdf.pipeline.model_sha256`); None without one."""
+    from kesbrdf.pipeline import model_sha256
+
+    return model_sha256(target)
 
 
 def fit_key(digest: str, material: str, options: dict) -> str:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from kesbrdf.export._framework import ExportResult
+
 __all__ = ["export"]
 
 
@@ -10,7 +12,7 @@ EXTENSIONS = (".glb",)
 HELP = 'binary glTF 2.0 (.glb): the same fitted material and preview meshes'
 
 
-def export(model, out, *, fit=None, fit_grid=None, error_grid=None) -> dict:
+def export(model, out, *, fit=None, fit_grid=None, error_grid=None) -> ExportResult:
     """Write a ``.glb`` (see :mod:`kesbrdf.export.gltf`)."""
     from kesbrdf.export.gltf import export as export_gltf
 

@@ -30,6 +30,7 @@ import numpy as np
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.export._framework import ExportResult
 
 __all__ = ["export", "build_gltf", "fit_error_record", "agreement_numbers", "OPEN_WITH"]
 
@@ -216,7 +217,7 @@ EXTENSIONS = (".gltf",)
 HELP = 'glTF 2.0 (JSON + embedded buffer): fitted metallic-roughness + KHR anisotropy/sheen/specular/ior on a swatch and a sphere'
 
 
-def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, error_grid=None) -> dict:
+def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, error_grid=None) -> ExportResult:
     """Write ``model``'s fitted glTF material on a swatch and a sphere to ``out``.
 
     Parameters
@@ -230,8 +231,9 @@ def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, e
 
     Returns
     -------
-    dict
-        ``paths``, ``size``, ``fit`` (params and error), ``fit_error`` (NRMSE), ``open_with``.
+    ExportResult
+        ``agreement``: ``fit`` (params and error), ``fit_error`` (image RMSE, NRMSE,
+        rel. L1, bounds hit), ``exact`` (False: a fitted approximation).
     """
     from kesbrdf.export.analytic_fit import ERROR_GRID, FIT_GRID, fit_analytic
     from kesbrdf.export.gltf_pbr import GLTF_PBR
@@ -254,12 +256,6 @@ def export(model, out, *, binary: bool | None = None, fit=None, fit_grid=None, e
         else:
             gltf.buffers[0].uri = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
             gltf.save_json(str(tmp))
-    return {
-        "format": "glb" if binary else "gltf",
-        "paths": [str(out)],
-        "size": out.stat().st_size,
-        "fit": fit.as_dict(),
-        "fit_error": agreement_numbers(fit),
-        "exact": False,
-        "open_with": OPEN_WITH,
-    }
+    return ExportResult("glb" if binary else "gltf", [out], size=out.stat().st_size,
+                        agreement={"fit": fit.as_dict(), "fit_error": agreement_numbers(fit), "exact": False},
+                        open_with=OPEN_WITH)

@@ -14,7 +14,8 @@ The formulas and their sources:
   (Conty & Kulla 2017) exactly as ``KHR_materials_sheen`` writes it, with
   :func:`charlie_albedo` (the directional albedo E(μ, r) of that lobe, which the sheen
   extension tells implementations to tabulate) integrated here by quadrature.
-- :func:`fresnel_dielectric` — the unpolarised Fresnel reflectance of a dielectric.
+- :func:`fresnel_dielectric`, :func:`schlick_weight` — the unpolarised Fresnel reflectance of
+  a dielectric and Schlick's weight, from :mod:`kesbrdf.optics` (re-exported here).
 - :func:`imageworks_sheen` and :func:`zeltner_sheen` — the two ``sheen_bsdf`` modes of
   the MaterialX 1.39 reference implementation (``mx_microfacet_sheen.glsl``), which
   Standard Surface (``sheen``) and OpenPBR (``fuzz``) use; their directional albedos are
@@ -29,6 +30,8 @@ import dataclasses
 import functools
 
 import numpy as np
+
+from kesbrdf.optics import fresnel_dielectric, schlick_weight
 
 __all__ = [
     "PairGeometry",
@@ -135,20 +138,6 @@ def ggx_anisotropic_visibility(wi, wr, t, b, alpha_t, alpha_b):
     lam_v = np.sqrt((alpha_t * (wr @ t)) ** 2 + (alpha_b * (wr @ b)) ** 2 + nv**2)
     lam_l = np.sqrt((alpha_t * (wi @ t)) ** 2 + (alpha_b * (wi @ b)) ** 2 + nl**2)
     return 0.5 / (nl * lam_v + nv * lam_l)
-
-
-def schlick_weight(cos_theta):
-    """(1 − |cos θ|)⁵, the Schlick Fresnel weight."""
-    return (1.0 - np.clip(np.abs(cos_theta), 0.0, 1.0)) ** 5
-
-
-def fresnel_dielectric(cos_theta, eta):
-    """Unpolarised Fresnel reflectance of a dielectric of relative index ``eta`` ≥ 1."""
-    c = np.clip(np.abs(cos_theta), 0.0, 1.0)
-    g = np.sqrt(np.maximum(eta**2 - 1.0 + c**2, 0.0))
-    a = (g - c) / (g + c)
-    bb = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return 0.5 * a**2 * (1.0 + bb**2)
 
 
 # ------------------------------------------------------------------ Charlie (glTF sheen)

@@ -128,12 +128,13 @@ def scene_xml(bsdf_xml: str, *, width: int = 320, height: int = 240, spp: int = 
 """
 
 
-def _kesbrdf_bsdf(model_name: str, mapping: str) -> str:
+def _kesbrdf_bsdf(model_name: str, plugin: str, props: dict) -> str:
+    """The kesbrdf plugin entry ``model.render_plugin()`` names, with its properties."""
+    extra = "".join(f'        <string name="{k}" value="{v}"/>\n' for k, v in props.items())
     return f"""    <!-- kesbrdf plugin: register it first (import kesbrdf.render) -->
-    <bsdf type="kesbrdf" id="fabric">
+    <bsdf type="{plugin}" id="fabric">
         <string name="filename" value="{model_name}"/>
-        <string name="mapping" value="{mapping}"/>
-        <boolean name="two_sided" value="false"/>
+{extra}        <boolean name="two_sided" value="false"/>
     </bsdf>
 """
 
@@ -153,7 +154,13 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
     from kesbrdf._atomic import write_text
     from kesbrdf.errors import ExportError
 
-    plugin = getattr(model, "kind", "kes") == "kes"  # what the kesbrdf plugin reads
+    plugin, props = model.render_plugin(mapping=mapping)  # the kesbrdf plugin drawing this model
+    kes_mapping = mapping if "mapping" in props else None  # the KES mapping applies to it
+    # a scene of the (φ, γ) table plugin, which every kind's table view feeds; a kind
+    # with its own plugin gets the measured scene only (as before: one scene per file)
+    table_plugin = plugin == "kesbrdf"
+    if table_plugin:
+        model.table_view()  # a kind that cannot be tabulated says so before anything is written
     import inspect
 
     from kesbrdf.export import rgl_bsdf
@@ -170,28 +177,29 @@ def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, ma
     size = dict(width=width, height=height, spp=spp)
     origin = f"kesbrdf {__version__}, model sha256 {rgl_bsdf.model_sha256(model)[:16]}"
     paths, agreement, notes = [], {}, []
-    measured = measured or not plugin
+    measured = measured or not table_plugin
     if measured:  # the slow part first: a failure leaves no scene pointing at a missing file
         bsdf_path = out.with_name(f"{stem}.bsdf")
-        r = rgl_bsdf.export(model, bsdf_path, mapping=mapping if plugin else None, check=check, **bsdf_options)
+        r = rgl_bsdf.export(model, bsdf_path, mapping=kes_mapping, check=check, **bsdf_options)
         agreement = {f"bsdf_{k}": v for k, v in r.agreement.items()}
-    if plugin:
+    if table_plugin:
         model_path = out.with_name(f"{stem}.kes.json")
         model.save(model_path)
-        text = scene_xml(_kesbrdf_bsdf(model_path.name, mapping), title=f"{stem}: kesbrdf plugin ({origin})", **size)
+        text = scene_xml(_kesbrdf_bsdf(model_path.name, plugin, props), title=f"{stem}: kesbrdf plugin ({origin})", **size)
         write_text(out, text)
         paths += [out, model_path]
-        notes.append("the kesbrdf-plugin scene renders the model itself (exact)")
+        notes.append("the kesbrdf-plugin scene renders the model itself (exact)" if model.has_table else
+                     f"the kesbrdf-plugin scene renders the (phi, gamma) table tabulated from the {model.kind!r} model")
     else:
-        notes.append(f"the kesbrdf plugin reads models of kind 'kes', this one is {model.kind!r}: "
+        notes.append(f"the {plugin} plugin draws this {model.kind!r} model in kesbrdf renders; "
                      f"{out.name} uses Mitsuba's measured plugin on the .bsdf export")
     if measured:
-        measured_path = out.with_name(f"{stem}_measured.xml") if plugin else out
+        measured_path = out.with_name(f"{stem}_measured.xml") if table_plugin else out
         text = scene_xml(_measured_bsdf(bsdf_path.name), title=f"{stem}: measured plugin ({origin})", **size)
         write_text(measured_path, text)
         paths += [measured_path, bsdf_path]
         notes.append(f"{measured_path.name} renders {bsdf_path.name} with Mitsuba's measured plugin (approximate)")
     open_with = "; ".join(
-        ([f"Python: import kesbrdf.render, mitsuba as mi; mi.render(mi.load_file('{out.name}'))"] if plugin else [])
+        ([f"Python: import kesbrdf.render, mitsuba as mi; mi.render(mi.load_file('{out.name}'))"] if table_plugin else [])
         + ([f"command line: mitsuba -m scalar_rgb {measured_path.name}"] if measured else []))
     return ExportResult("mitsuba-scene", paths, agreement=agreement, notes=notes, open_with=open_with)

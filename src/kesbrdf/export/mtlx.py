@@ -25,6 +25,7 @@ from pathlib import Path
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.export._framework import ExportResult
 
 __all__ = ["export", "build_document", "load_standard_libraries", "OPEN_WITH", "VARIANTS"]
 
@@ -145,7 +146,7 @@ EXTENSIONS = (".mtlx",)
 HELP = 'MaterialX document: fitted OpenPBR Surface and Autodesk Standard Surface materials'
 
 
-def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=None, error_grid=None, name: str = "kesbrdf_fabric") -> dict:
+def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=None, error_grid=None, name: str = "kesbrdf_fabric") -> ExportResult:
     """Write ``model``'s OpenPBR and Standard Surface fits to a ``.mtlx`` file.
 
     Parameters
@@ -156,8 +157,8 @@ def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=
 
     Returns
     -------
-    dict
-        ``paths``, ``size``, ``fit_error`` per variant, ``materials``, ``open_with``.
+    ExportResult
+        ``agreement``: ``materials``, ``fit`` and ``fit_error`` per variant, ``exact``.
     """
     from kesbrdf.export.analytic_fit import ERROR_GRID, FIT_GRID, fit_analytic
     from kesbrdf.export.gltf import agreement_numbers
@@ -183,13 +184,10 @@ def export(model, out, *, variants=VARIANTS, fits: dict | None = None, fit_grid=
         options = mx.XmlWriteOptions()
         options.writeXIncludeEnable = False
         mx.writeToXmlFile(doc, str(tmp), options)
-    return {
-        "format": "mtlx",
-        "paths": [str(out)],
-        "size": out.stat().st_size,
+    agreement = {
         "materials": [f"{name}_{v}" for v in variants],
         "fit": {v: f.as_dict() for v, f in fits.items()},
         "fit_error": {v: agreement_numbers(f) for v, f in fits.items()},
         "exact": False,
-        "open_with": OPEN_WITH,
     }
+    return ExportResult("mtlx", [out], size=out.stat().st_size, agreement=agreement, open_with=OPEN_WITH)

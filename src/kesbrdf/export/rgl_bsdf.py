@@ -365,9 +365,36 @@ def relative_errors(got, want, wi, wr, grazing_deg: float = 60.0) -> dict:
     return out
 
 
+#: Tensors built in this process, by model content and options: ``kesbrdf demo`` exports
+#: ``rgl-bsdf`` and then ``mitsuba-scene``, whose ``measured`` scene needs the same RGB
+#: tensor; without this the second export rebuilt it (15 s of the demo's CPU, profiled
+#: with cProfile: 96 % of the mitsuba-scene export was ``build_fields``).  Two entries
+#: (RGB and spectral); the arrays are a few MiB.
+_FIELDS_MEMO: dict = {}
+_FIELDS_MEMO_SIZE = 2
+
+
+def _memo_key(model, spectral, options) -> str:
+    import json
+
+    resolved = {**options, "mapping": resolve_mapping(model, options.get("mapping"))}
+    return json.dumps([model_sha256(model), bool(spectral), sorted((k, repr(v)) for k, v in resolved.items())])
+
+
+def built_fields(model, spectral: bool = False, **options) -> dict:
+    """:func:`build_fields`, memoised in this process by model content and options."""
+    key = _memo_key(model, spectral, options)
+    if key not in _FIELDS_MEMO:
+        fields = build_fields(model, spectral=spectral, **options)
+        while len(_FIELDS_MEMO) >= _FIELDS_MEMO_SIZE:
+            _FIELDS_MEMO.pop(next(iter(_FIELDS_MEMO)))
+        _FIELDS_MEMO[key] = fields
+    return _FIELDS_MEMO[key]
+
+
 def _export(model, out, spectral, check, **options) -> ExportResult:
     t0 = time.perf_counter()
-    fields = build_fields(model, spectral=spectral, **options)
+    fields = built_fields(model, spectral=spectral, **options)
     seconds = time.perf_counter() - t0
     from kesbrdf.io.tensor_file import write_tensor_file
 

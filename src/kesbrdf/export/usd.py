@@ -32,6 +32,7 @@ from pathlib import Path
 
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.export._framework import ExportResult
 
 __all__ = ["export", "OPEN_WITH", "MATERIAL_PATH"]
 
@@ -171,13 +172,14 @@ EXTENSIONS = (".usda", ".usd")
 HELP = 'USD stage: OpenPBR network + UsdPreviewSurface fallback bound to preview meshes (writes the .mtlx beside it)'
 
 
-def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=None, write_mtlx: bool = True) -> dict:
+def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=None, write_mtlx: bool = True) -> ExportResult:
     """Write a ``.usda`` stage (and, by default, the sidecar ``.mtlx``) for ``model``.
 
     Returns
     -------
-    dict
-        ``paths`` (the .usda, then the .mtlx), ``size`` (of the .usda), ``fit_error``, ``open_with``.
+    ExportResult
+        ``paths``: the .usda, then the .mtlx; ``agreement``: ``material`` (the prim path),
+        ``fit_error`` per fit, ``exact``, ``mtlx_size``.
     """
     from kesbrdf.export.analytic_fit import ERROR_GRID, FIT_GRID, fit_analytic
     from kesbrdf.export.gltf import agreement_numbers
@@ -203,19 +205,17 @@ def export(model, out, *, fits: dict | None = None, fit_grid=None, error_grid=No
                           fit_grid=fit_grid, error_grid=error_grid)
         mtlx_name = "./" + mtlx_path.name
         paths.append(str(mtlx_path))
-        result_extra["mtlx_size"] = res["size"]
+        result_extra["mtlx_size"] = res.size
     with atomic_path(out) as tmp:
         layer = Sdf.Layer.CreateAnonymous(".usda")
         stage = Usd.Stage.Open(layer)
         build_stage(stage, fits["openpbr"], mtlx_name, fits["preview_surface"])
         tmp.write_text(layer.ExportToString())
-    return {
-        "format": "usd",
-        "paths": paths,
-        "size": out.stat().st_size,
+    agreement = {
         "material": MATERIAL_PATH,
         "fit_error": {"openpbr": agreement_numbers(fits["openpbr"]), "preview_surface": agreement_numbers(fits["preview_surface"])},
         "exact": False,
-        "open_with": OPEN_WITH,
         **result_extra,
     }
+    return ExportResult("usd", [Path(p) for p in paths], size=out.stat().st_size, agreement=agreement,
+                        open_with=OPEN_WITH)

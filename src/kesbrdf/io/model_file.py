@@ -24,11 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
 from kesbrdf.errors import ModelError, where
 from kesbrdf.io.files import open_regular
 from kesbrdf.io.text import MAX_ABS_NUMBER
+from kesbrdf.io.model_writer import FORMAT, FORMAT_VERSION, encode_array, model_to_dict, save_model
 from kesbrdf.models.base import kind_class
 
 __all__ = [
@@ -45,8 +45,6 @@ __all__ = [
     "MAX_DEPTH",
 ]
 
-FORMAT = "kesbrdf-model"
-FORMAT_VERSION = 1
 #: Most array elements a model file may hold, in one array and in all together: 2**24
 #: doubles = 128 MiB.  The largest table kesbrdf fits is a kes-halfdiff at the finest
 #: 1° θ step, 360 × 91 × 91 × 3 channels ≈ 8.9 million (docs/formats.md).
@@ -60,12 +58,6 @@ MAX_DEPTH = 64
 DTYPES = ("<f8", "<f4")
 _BOUND = f"{MAX_ABS_NUMBER:g}".replace("e+", "e")  # "1e100"
 _SHARED = ("channels", "input", "parameters", "diagnostics")
-
-
-def encode_array(a) -> dict:
-    """``{"dtype": "<f8", "shape": [...], "data": base64}`` of a C-order little-endian copy."""
-    a = np.ascontiguousarray(np.asarray(a, dtype="<f8"))
-    return {"dtype": "<f8", "shape": list(a.shape), "data": base64.b64encode(a.tobytes()).decode("ascii")}
 
 
 def _is_int(x) -> bool:
@@ -143,32 +135,6 @@ def _check_tree(doc, source) -> None:
                     shown = repr(node) if math.isfinite(node) else "a number that overflows a double"
                 raise ModelError(f"{where(source)}{_field_name(path)}: expected a finite number of magnitude "
                                  f"at most {_BOUND}, got {shown}")
-
-
-def model_to_dict(model) -> dict:
-    """The model file document of any registered kind."""
-    fields, arrays = model.to_payload()
-    doc = {
-        "format": FORMAT,
-        "format_version": FORMAT_VERSION,
-        "kesbrdf_version": model.kesbrdf_version,
-        "kind": model.kind,
-        "channels": list(model.channels),
-        "input": model.input_info,
-        "parameters": model.parameters,
-        "diagnostics": model.diagnostics,
-    }
-    clash = set(fields) & (set(doc) | {"arrays"})
-    if clash:
-        raise RuntimeError(f"kind {model.kind!r}: payload fields {sorted(clash)} clash with the header")
-    doc.update(fields)
-    doc["arrays"] = {name: encode_array(a) for name, a in arrays.items()}
-    return doc
-
-
-def save_model(path, model) -> Path:
-    """Write ``model`` to ``path`` atomically."""
-    return write_text(path, json.dumps(model_to_dict(model), indent=1, allow_nan=False) + "\n")
 
 
 def load_model(path):

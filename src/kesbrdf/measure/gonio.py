@@ -3,7 +3,7 @@
 Protocols
 ---------
 ``paper``
-    The paper's STEP 1 (DESIGN §1): ψ = 0, 45, 90, 135°, θ_i = 90° − k·step,
+    The paper's STEP 1 (docs/method.md, "The paper's steps"): ψ = 0, 45, 90, 135°, θ_i = 90° − k·step,
     θ_r = k·step for k = 1 … 90/step − 1 (29 per orientation at 3°: 116 samples).
 ``dense``
     Every (θ_i, θ_r) pair on a grid of ``step_deg`` from 0 to below 90° at each

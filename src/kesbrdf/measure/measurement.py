@@ -3,7 +3,7 @@
 A :class:`Measurement` holds N samples of C channels.  Each sample is a pair of
 directions in the fabric frame (x = warp, y = weft, z = normal) and its BRDF value
 f_r in 1/sr.  Samples taken in the paper's in-plane protocol also carry ``psi``, the
-angle between the plane of incidence and the warp (DESIGN §1–2); general samples
+angle between the plane of incidence and the warp (docs/method.md, "The paper's steps" and "Conventions"); general samples
 have ``psi = NaN``.
 """
 

@@ -258,7 +258,7 @@ def expected_error(truths, groups, fit=default_fit, noise: float = 0.0, seed: in
             per_truth[t.name] = {"median": 1.0, "error": str(exc)}
             allv.append(1.0)
             continue
-        kinds.add(getattr(model, "kind", "kes"))
+        kinds.add(model.kind)
         errs = _model_errors(model, t)
         per_truth[t.name] = {
             "median": float(np.median(errs)),

@@ -47,10 +47,38 @@ Fitters and automatic selection
 one too, registered with :func:`register_fitter`.  :data:`FIT_MODULES` says where each
 lives and :data:`AUTO_CANDIDATES` is the order ``kind="auto"`` tries them in: the first
 candidate that uses every row wins, else the one that uses most (docs/models.md).
-A new kind joins automatic selection with one entry in each.
+A new kind joins automatic selection with one entry in each.  A fitter's
+``auto_compare`` (``"loo"``, ``"kfold"`` or None) says how ``kind="auto"`` checks its
+choice against the woven-cloth prior on the user's data (:func:`kesbrdf.fit`).
 
-Consumers (figures, renderer, viewer, exports) call :func:`require_kind` with the kinds
-they support, which gives a one-line :class:`~kesbrdf.errors.ModelError` for the rest.
+Capabilities: consumers ask, never compare kind names
+----------------------------------------------------
+Figures, the report, validation, the renderer, the exports and the viewer ask a model
+what it can do (as pbrt-v4's ``BxDF::Flags()``), so every registered kind works in each
+of them and a new kind needs no edit outside its own module:
+
+``describe() -> str``
+    One line naming the model (kind, table or parameters, channels).
+``table_view(n_phi=None, n_gamma=None)``
+    The tabulated lobe q(φ, γ) (:mod:`kesbrdf.models.table`), a model of the ``kes``
+    kind: a kind with a (φ, γ) table returns it, every other kind is tabulated through
+    ``evaluate`` (:func:`kesbrdf.models.table.tabulate`).  ``has_table`` says which.
+``has_sigma``, ``predict_sigma(wi, wr)``
+    A per-prediction σ: ``(f, σ, σ_ln f)``, or None for kinds that carry none.
+``render_plugin(mapping=None, extrapolation=None) -> (plugin, props)``
+    The Mitsuba plugin that draws the model and the properties it takes; the base class
+    answers the ``kesbrdf`` table plugin, which draws the tabulated view.  An option the
+    plugin cannot honour is a one-line :class:`~kesbrdf.errors.ModelError`.
+``refit(mask, measurement=None)``
+    The same fit (same fitter, same recorded options) on the rows ``mask`` of the
+    measurement, for leave-one-out validation.  The measurement is the one the model was
+    fitted to in this session (:meth:`ReflectanceModel.remember_fit`) or one passed in; a model read
+    from a file holds no samples, so without one it is a one-line ModelError.
+``sample_frame_warp``
+    Azimuth of the warp in the measurement's frame (radians; 0 for fabric-frame fits).
+
+Where a view genuinely cannot be drawn, the consumer raises a one-line
+:class:`~kesbrdf.errors.ModelError` (exit 2 from the CLI) and the rest still runs.
 """
 
 from __future__ import annotations
@@ -72,10 +100,10 @@ __all__ = [
     "fitter_class",
     "known_kinds",
     "known_fitters",
-    "require_kind",
     "KIND_MODULES",
     "FIT_MODULES",
     "AUTO_CANDIDATES",
+    "TABLE_KIND",
 ]
 
 #: Where each kind's class lives; imported on first use so that a kind's heavy
@@ -84,6 +112,7 @@ KIND_MODULES: dict[str, str] = {
     "kes": "kesbrdf.models.kes",
     "kes-halfdiff": "kesbrdf.models.halfdiff",
     "fibre-prior": "kesbrdf.models.fibre_prior",
+    "fibre-coord": "kesbrdf.models.fibre_coord",
 }
 
 #: Where each fitter lives: every kind, plus fitting methods that produce an existing
@@ -98,6 +127,10 @@ FIT_MODULES: dict[str, str] = {
 #: models first, so the paper's protocol gets the paper's kind.
 AUTO_CANDIDATES: list[str] = ["kes", "kes-halfdiff", "scattered"]
 
+#: The kind whose models are the (φ, γ) table format (:mod:`kesbrdf.models.table`):
+#: :meth:`ReflectanceModel.table_view` returns one, built by its class's ``tabulate``.
+TABLE_KIND = "kes"
+
 _REGISTRY: dict[str, type] = {}
 _FITTERS: dict[str, type] = {}
 
@@ -110,6 +143,9 @@ class ReflectanceModel:
     #: Names of the keyword options ``fit_measurement`` accepts (``kesbrdf.fit`` rejects
     #: the others with a one-line error).
     fit_options: ClassVar[tuple[str, ...]] = ()
+    #: How ``kind="auto"`` checks this fitter's choice against the prior: ``"loo"``
+    #: (leave-one-orientation-out), ``"kfold"`` or None (module docstring).
+    auto_compare: ClassVar[str | None] = None
     #: Names of the arrays ``to_payload`` writes and ``from_payload`` needs.
     array_names: ClassVar[tuple[str, ...]] = ()
 
@@ -159,8 +195,99 @@ class ReflectanceModel:
         raise NotImplementedError
 
     def mirror_behaviour(self) -> dict:
-        """How the lobe varies with azimuth at the mirror direction (DESIGN §4); {} if n/a."""
+        """How the lobe varies with azimuth at the mirror direction (docs/method.md, "Diagnostics"); {} if n/a."""
         return {}
+
+    # -- capabilities (module docstring) -----------------------------------------
+    #: True when the kind carries a per-prediction σ (:meth:`predict_sigma`).
+    has_sigma: ClassVar[bool] = False
+
+    @property
+    def has_table(self) -> bool:
+        """True when :meth:`table_view` is the model's own (φ, γ) table, not a tabulation."""
+        return False
+
+    @property
+    def sample_frame_warp(self) -> float:
+        """Sample-frame azimuth of the warp, radians (0: the model is in the fabric frame)."""
+        return 0.0
+
+    def describe(self) -> str:
+        """One line naming the model: kind, what it holds, channels."""
+        return f"{self.kind} model, channels {', '.join(self.channels)}"
+
+    def table_view(self, n_phi: int | None = None, n_gamma: int | None = None):
+        """The tabulated lobe q(φ, γ) as a ``kes``-kind model (:func:`kesbrdf.models.table.tabulate`).
+
+        Figures that read the table (Fig. 5), the table shaders and exports use it; the
+        base class tabulates through :meth:`evaluate` so every kind has one.
+        """
+        key = (n_phi, n_gamma)
+        cache = self.__dict__.setdefault("_table_views", {})
+        if key not in cache:
+            cache[key] = kind_class(TABLE_KIND).tabulate(self, n_phi, n_gamma)
+        return cache[key]
+
+    def predict_sigma(self, wi, wr):
+        """``(f, σ, σ_ln f)`` at direction pairs (N, 3), or None: the kind carries no σ."""
+        return None
+
+    def render_plugin(self, mapping: str | None = None, extrapolation: str | None = None) -> tuple[str, dict]:
+        """(Mitsuba plugin name, properties) drawing this model (module docstring).
+
+        The base class: the ``kesbrdf`` table plugin on :meth:`table_view`, which takes
+        the KES ``mapping`` and the ``extrapolation`` beyond the last γ.
+        """
+        props = {}
+        if mapping is not None:
+            props["mapping"] = mapping
+        if extrapolation is not None:
+            props["extrapolation"] = extrapolation
+        return "kesbrdf", props
+
+    def remember_fit(self, measurement, fitter: str, options: dict) -> None:
+        """Keep what :meth:`refit` needs for this session: the measurement, the fitter
+        and its options (not written to the model file)."""
+        self.__dict__["_fit_memory"] = (measurement, fitter, dict(options))
+
+    def refit_options(self) -> dict:
+        """The options :meth:`refit` passes to the fitter: those of this session's fit,
+        else the recorded ``parameters`` that are options of the fitter."""
+        memory = self.__dict__.get("_fit_memory")
+        if memory is not None:
+            return dict(memory[2])
+        fitter = fitter_class(self.fitter_name)
+        return {k: v for k, v in self.parameters.items() if k in fitter.fit_options}
+
+    @property
+    def fitter_name(self) -> str:
+        """The fitter that made this model (``parameters["fit"]`` when a fitting method
+        other than the kind's own made it, e.g. ``scattered``)."""
+        memory = self.__dict__.get("_fit_memory")
+        if memory is not None:
+            return memory[1]
+        name = self.parameters.get("fit") if isinstance(self.parameters, dict) else None
+        return name if isinstance(name, str) and name in FIT_MODULES else self.kind
+
+    def refit(self, mask, measurement=None):
+        """The same fit on the rows ``mask`` of ``measurement`` (default: the measurement
+        this model was fitted to in this session); a one-line ModelError when there is none.
+        """
+        memory = self.__dict__.get("_fit_memory")
+        m = measurement if measurement is not None else (memory[0] if memory else None)
+        if m is None:
+            raise ModelError(
+                f"refit of a {self.kind!r} model: expected the measurement it was fitted to, got none "
+                "(a model file holds no samples; pass the measurement)"
+            )
+        mask = np.asarray(mask)
+        if mask.dtype == bool and mask.shape != (len(m),):
+            raise ModelError(f"refit: expected a mask of {len(m)} rows, got shape {mask.shape}")
+        sub = m.subset(mask)
+        options = self.refit_options()
+        model = fitter_class(self.fitter_name).fit_measurement(sub, **options)
+        model.remember_fit(sub, self.fitter_name, options)
+        return model
 
     def to_payload(self) -> tuple[dict, dict[str, np.ndarray]]:  # pragma: no cover
         raise NotImplementedError
@@ -183,8 +310,8 @@ class ReflectanceModel:
         return None
 
     def save(self, path):
-        """Write the model file atomically (:mod:`kesbrdf.io.model_file`)."""
-        from kesbrdf.io.model_file import save_model
+        """Write the model file atomically (:mod:`kesbrdf.io.model_writer`)."""
+        from kesbrdf.io.model_writer import save_model
 
         return save_model(path, self)
 
@@ -198,6 +325,9 @@ def register(cls: type) -> type:
         raise RuntimeError(f"{cls.__name__}: a model kind needs 'kind' and 'mappings'")
     _REGISTRY[cls.kind] = cls
     _FITTERS.setdefault(cls.kind, cls)
+    # a kind registered from elsewhere (a plug-in, a test) joins known_kinds() too
+    KIND_MODULES.setdefault(cls.kind, cls.__module__)
+    FIT_MODULES.setdefault(cls.kind, cls.__module__)
     return cls
 
 
@@ -244,20 +374,3 @@ def fitter_class(name) -> type:
     if name not in _FITTERS:
         raise RuntimeError(f"module {FIT_MODULES[name]} did not register fitter {name!r}")
     return _FITTERS[name]
-
-
-def require_kind(model, kinds, consumer: str, source=None):
-    """Return ``model`` if its kind is one of ``kinds``; else a one-line :class:`ModelError`.
-
-    >>> class M: kind = "kes-halfdiff"
-    >>> require_kind(M(), ("kes",), "figure 5")
-    Traceback (most recent call last):
-    ...
-    kesbrdf.errors.ModelError: figure 5 supports models of kind 'kes'; got a 'kes-halfdiff' model
-    """
-    kind = getattr(model, "kind", None)
-    if kind not in kinds:
-        raise ModelError(
-            f"{where(source)}{consumer} supports models of kind {', '.join(map(repr, kinds))}; got a {kind!r} model"
-        )
-    return model

@@ -1,4 +1,4 @@
-r"""From a model to a BRDF f_r(wi, wr) (paper eq. 3–4, DESIGN §4): the public front end.
+r"""From a model to a BRDF f_r(wi, wr) (paper eq. 3–4, docs/method.md, "From the table to a BRDF"): the public front end.
 
 :func:`evaluate` works for every model kind (:mod:`kesbrdf.models.base`): it asks the
 model, which checks the mapping it was given against the ones its kind supports and
@@ -30,7 +30,7 @@ direction, so θ = 90° exactly — gives 0; a non-finite component gives NaN; f
 input never gives inf or NaN.  Large inputs are evaluated in chunks.
 
 The direction mappings themselves live in :mod:`kesbrdf.models.mappings` and the table
-lookup in :mod:`kesbrdf.models.kes`; both are re-exported here for backward compatibility.
+lookup in :mod:`kesbrdf.models.table`; both are re-exported here for backward compatibility.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from kesbrdf.models.mappings import (
     to_phi_gamma,
     validate_mapping,
 )
-from kesbrdf.models.kes import lookup
+from kesbrdf.models.table import lookup
 
 __all__ = [
     "MAPPINGS",

@@ -1,6 +1,6 @@
 r"""A few-parameter woven-cloth prior and its fit (docs/prior.md).
 
-The model (``shared/reference/fibre-prior.md``, after Irawan & Marschner 2012)
+The model (docs/prior.md, after Irawan & Marschner 2012)
 ---------------------------------------------------------------------------------
 
 .. math::
@@ -48,9 +48,8 @@ otherwise n ln(RSS/n) + k ln n.
 Derivatives (:func:`evaluate_with_jacobian`, docs/prior.md §3): analytic for every
 parameter, the staple twist ψ included (through v*(u), n, t and cos φ), except the axis
 offset δ, which rotates every frame and is a one-sided difference (one geometry
-evaluation per Jacobian).  The residual's Jacobian is (∂f/∂θ)/((f + ε)σ).  Fit CPU time
-before (forward differences of all parameters) → after, BLAS single-threaded, loaded
-machine: 116 samples 1.6–2.6 s → 1.4–2.5 s, 900 samples 3.3–3.8 s → 2.7–3.2 s.
+evaluation per Jacobian).  The residual's Jacobian is (∂f/∂θ)/((f + ε)σ).  Fit times:
+docs/results.md, "prior".
 """
 
 from __future__ import annotations
@@ -64,6 +63,8 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError
+from kesbrdf.models.mappings import evaluate_pairs
+from kesbrdf.optics import fresnel_dielectric
 
 __all__ = [
     "FAMILY_KINDS",
@@ -71,7 +72,6 @@ __all__ = [
     "FibrePrior",
     "fit_prior",
     "evaluate_with_jacobian",
-    "fresnel_dielectric",
     "THETA_D_ETA",
     "U_NODES",
     "V_NODES",
@@ -104,18 +104,7 @@ THETA_D_SPREAD = 0.05
 MIN_THETA_D_SAMPLES = 16
 
 
-def fresnel_dielectric(cos_t, eta: float = THETA_D_ETA):
-    """Unpolarised Fresnel reflectance from air into a dielectric of index ``eta``."""
-    c = np.clip(np.abs(cos_t), 0.0, 1.0)
-    g2 = eta * eta - 1.0 + c * c
-    g = np.sqrt(np.maximum(g2, 0.0))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        a = (g - c) / (g + c)
-        b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return 0.5 * a * a * (1.0 + b * b)
-
-
-_F45 = float(fresnel_dielectric(math.cos(math.pi / 4)))
+_F45 = float(fresnel_dielectric(math.cos(math.pi / 4), THETA_D_ETA))
 
 
 @dataclass(frozen=True)
@@ -370,7 +359,7 @@ def _base(wi, wr):
     s = wi + wr
     norm_sum = np.linalg.norm(s, axis=-1)
     h = s / np.maximum(norm_sum, 1e-300)[:, None]
-    Phi = fresnel_dielectric(np.sum(wi * h, axis=-1)) / _F45
+    Phi = fresnel_dielectric(np.sum(wi * h, axis=-1), THETA_D_ETA) / _F45
     return norm_sum, h, Phi, np.sum(wi * wr, axis=-1)
 
 
@@ -534,21 +523,14 @@ class FibrePrior:
         return dict(zip(self.spec.names(), map(float, self.theta)))
 
     def __call__(self, wi, wr) -> np.ndarray:
-        wi = np.asarray(wi, float)
-        wr = np.asarray(wr, float)
-        wi, wr = np.broadcast_arrays(wi, wr)
-        shape = wi.shape[:-1]
-        fwi, fwr = wi.reshape(-1, 3), wr.reshape(-1, 3)
-        above = (fwi[:, 2] > 0) & (fwr[:, 2] > 0)
-        nan = np.isnan(fwi).any(-1) | np.isnan(fwr).any(-1)
-        out = np.zeros((fwi.shape[0], self.spec.n_channels))
-        idx = np.flatnonzero(above & ~nan)
-        for start in range(0, idx.size, 20000):  # bounded memory for large grids
-            sel = idx[start:start + 20000]
-            out[sel] = evaluate_batch(self.spec, self.theta[None], fwi[sel], fwr[sel])[0]
-        out = np.where(np.isfinite(out), out, 0.0)
-        out[nan] = np.nan
-        return out.reshape(shape + (self.spec.n_channels,))
+        """f_prior(wi, wr) in 1/sr, (..., C); horizon, NaN and broadcasting as every model
+        (:func:`kesbrdf.models.mappings.evaluate_pairs`); a non-finite value gives 0."""
+        def core(a, b, _mapping):
+            out = evaluate_batch(self.spec, self.theta[None], a, b)[0]
+            return np.where(np.isfinite(out), out, 0.0)
+
+        # chunks of 20000 pairs bound the memory of evaluate_batch on large grids
+        return evaluate_pairs(core, wi, wr, self.spec.n_channels, "", chunk=20000)
 
     def to_dict(self) -> dict:
         return {"kinds": list(self.spec.kinds), "n_channels": self.spec.n_channels,

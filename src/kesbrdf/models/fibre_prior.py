@@ -50,10 +50,12 @@ from kesbrdf.models.mappings import to_phi_gamma
 from kesbrdf.errors import MeasurementError, ModelError
 from kesbrdf.models.base import ReflectanceModel, register
 from kesbrdf.measure.measurement import Measurement
-from kesbrdf.models.kes import line_weight, lookup
-from kesbrdf.models.fibre_physics import FibrePrior, fit_prior, fresnel_dielectric
+from kesbrdf.models.kes import line_weight
+from kesbrdf.models.table import lookup
+from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
+from kesbrdf.optics import fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
+__all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
@@ -90,6 +92,9 @@ class FibrePriorModel(ReflectanceModel):
 
     kind = "fibre-prior"
     mappings = ("deviation",)
+    #: The class of :attr:`prior` read back by :meth:`from_payload` (a subclass kind with
+    #: another prior, e.g. ``fibre-coord``, names its own).
+    prior_class = FibrePrior
     fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
 
     def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
@@ -155,6 +160,39 @@ class FibrePriorModel(ReflectanceModel):
     def __call__(self, wi, wr):
         return self.evaluate(wi, wr)
 
+    # -- capabilities (kinds contract) -----------------------------------------------
+    has_sigma = True
+
+    def describe(self) -> str:
+        chosen = self.parameters.get("prior")
+        return (f"fibre-prior ({chosen or 'woven-cloth prior'}"
+                f"{' x KES residual' if self.residual is not None else ', no residual'}), "
+                f"channels {', '.join(self.channels)}")
+
+    def predict_sigma(self, wi, wr):
+        """``(f, σ, σ_ln f)`` (:func:`predict_with_uncertainty`, docs/prior.md §5)."""
+        wi = np.asarray(wi, float).reshape(-1, 3)
+        wr = np.asarray(wr, float).reshape(-1, 3)
+        f, sigma, sigma_log = predict_with_uncertainty(self, wi, wr)
+        f = np.where(np.isfinite(f), f, 0.0)
+        sigma = np.where(np.isfinite(sigma), np.maximum(sigma, 0.0), 0.0)
+        return f, sigma, sigma_log
+
+    def render_plugin(self, mapping=None, extrapolation=None):
+        """The ``kesbrdf_prior`` plugin; its extrapolation is its own residual's relaxation
+        (``hold`` is its default and is not passed on); a KES ``mapping`` is an error."""
+        if mapping not in (None, "deviation"):
+            raise ModelError(f"mapping {mapping!r} applies to kes models only; a {self.kind} model has its own "
+                             "parametrisation (drop --mapping)")
+        props = {} if extrapolation in (None, "hold") else {"extrapolation": extrapolation}
+        return "kesbrdf_prior", props
+
+    def refit_options(self) -> dict:
+        """This session's options, else the defaults (the file records what the fit found,
+        e.g. whether a residual was fitted, not the options asked)."""
+        memory = self.__dict__.get("_fit_memory")
+        return dict(memory[2]) if memory is not None else {}
+
     # -- files --------------------------------------------------------------------
     def to_payload(self):
         fields = {"prior": self.prior.to_dict(), "has_residual": self.residual is not None}
@@ -186,7 +224,7 @@ class FibrePriorModel(ReflectanceModel):
     @classmethod
     def from_payload(cls, fields, arrays, shared, source=None):
         try:
-            prior = FibrePrior.from_dict(fields["prior"])
+            prior = cls.prior_class.from_dict(fields["prior"])
             residual = None
             if fields.get("has_residual") and fields["residual"].get("mode") == "halfdiff":
                 table = np.asarray(arrays["residual_table"], float)
@@ -447,6 +485,12 @@ def _fit_residual(prior: FibrePrior, m: Measurement):
     return ratio_table(rm)
 
 
+#: Public names of the fitting steps, for kinds built on this one (``fibre-coord``).
+fit_residual = _fit_residual
+bound_energy = _bound_energy
+fit_kes_candidate = _fit_kes_candidate
+
+
 #: Largest σ of ln f reported (a factor e³ ≈ 20): beyond it the number means "unknown".
 MAX_SIGMA_LOG = 3.0
 
@@ -533,7 +577,7 @@ def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
         # default Fresnel law and no θ_d dependence at all, on the specular fraction
         h = wi + wr
         h = h / np.maximum(np.linalg.norm(h, axis=-1, keepdims=True), 1e-300)
-        log_phi = np.log(np.maximum(fresnel_dielectric(np.sum(wi * h, axis=-1)) / fresnel_dielectric(np.cos(np.pi / 4)), 1e-300))
+        log_phi = np.log(np.maximum(fresnel_dielectric(np.sum(wi * h, axis=-1), THETA_D_ETA) / fresnel_dielectric(np.cos(np.pi / 4), THETA_D_ETA), 1e-300))
         fp = prior(wi, wr)
         kd = np.exp([prior.parameters()[f"log_kd_{c}"] for c in range(prior.spec.n_channels)])
         spec_frac = np.clip((fp - kd) / np.maximum(fp, 1e-300), 0.0, 1.0)

@@ -1,12 +1,12 @@
 r"""KES over the half-vector azimuth for measurements with several incidence angles.
 
 The ``"kes"`` model (:mod:`kesbrdf.models.kes`) uses one incidence line θ_i + θ_r = 90°,
-so over the hemisphere it extrapolates by assumption (DESIGN §4).  When every
+so over the hemisphere it extrapolates by assumption (docs/method.md, "Several incidence angles").  When every
 orientation was measured at many (θ_i, θ_r) pairs — ``kesbrdf.measure.gonio.measure(ref,
 protocol="dense")`` — this module builds the ``"kes-halfdiff"`` model, which keeps
 them all: for a pair (wi, wr) it takes the half vector's azimuth as φ, reads each
 measured orientation's in-plane table at the in-plane pair with the same half and
-difference angles (θ_h, θ_d), and applies KES over φ (DESIGN §4, last paragraphs).
+difference angles (θ_h, θ_d), and applies KES over φ (docs/method.md, "Several incidence angles").
 
 In-plane geometry
 -----------------
@@ -38,7 +38,7 @@ How the table is filled
    lobe's 1/w growth toward grazing angles, up to 1/λ.  ``"sqrtcos"`` is eq. 3's
    √(cos θ_i cos θ_r) unbounded (files written before ``bounded``, whose lobe albedo
    grows as 1/√cos θ_i at grazing incidence).
-   ``"none"`` (w = 1) tabulates f_r − c itself, as read literally from DESIGN §4.
+   ``"none"`` (w = 1) tabulates f_r − c itself, as read literally from the body-term split (docs/method.md, "The body term").
    Measured on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90° and 45°, viewer to
    80°, dense 6° protocol): anisotropic Ward α = 0.15/0.3, RMSE 0.0012 ("sqrtcos")
    vs 0.0015 ("none"); Ashikhmin–Shirley n = 10/100, 0.037 vs 0.033 (measured before
@@ -120,11 +120,10 @@ from kesbrdf.models.kes import (
     FALLBACKS,
     ORIENTATION_TOL,
     RELATIVE_NOISE_FLOOR,
-    check_uniform_grid,
-    check_values,
     fallback_warning,
     select_orientations,
 )
+from kesbrdf.models.table import check_uniform_grid, check_values
 
 __all__ = [
     "KIND",
@@ -216,6 +215,20 @@ class HalfDiffModel(ReflectanceModel):
 
     def mirror_behaviour(self) -> dict:
         return mirror_behaviour(self)
+
+    # -- capabilities (kinds contract) -------------------------------------------
+    def describe(self) -> str:
+        n_phi, n_h, n_d = self.table.shape[:3]
+        return (f"kes-halfdiff table {n_phi} x {n_h} x {n_d} over (phi_h, theta_h, theta_d), "
+                f"{self.orientations} orientations, channels {', '.join(self.channels)}")
+
+    def render_plugin(self, mapping=None, extrapolation=None):
+        """The ``kesbrdf_halfdiff`` plugin: its own (φ_h, θ_h, θ_d) parametrisation, so a
+        KES ``mapping`` other than the default is an error."""
+        if mapping not in (None, "deviation"):
+            raise ModelError(f"mapping {mapping!r} applies to kes models only; a {self.kind} model has its own "
+                             "parametrisation (drop --mapping)")
+        return "kesbrdf_halfdiff", ({} if extrapolation is None else {"extrapolation": extrapolation})
 
     def to_payload(self):
         return {}, {name: getattr(self, name) for name in _ARRAYS}
@@ -420,7 +433,7 @@ def fit_halfdiff(
     orientations : {None, 3, 4}
         As :func:`kesbrdf.models.kes.fit`.
     fallback : {"log", "error"}
-        What to do where K(φ) ≤ 0 between orientations (DESIGN §3): log fallback with
+        What to do where K(φ) ≤ 0 between orientations (docs/method.md, "Interpolation over orientation"): log fallback with
         a recorded warning (default) or :class:`KESError`.
     body : "auto", "none" or float
         Lambertian body term c in 1/sr (module docstring).
@@ -656,7 +669,7 @@ def evaluate_halfdiff(model: HalfDiffModel, wi, wr) -> np.ndarray:
 
 def mirror_behaviour(model: HalfDiffModel, n_theta_h: int = 3, theta_d_deg=(0.0, 30.0, 60.0)) -> dict:
     """How the lobe varies with φ_h as θ_h → 0 (the analogue of the ``kes`` kind's γ → 0
-    report, DESIGN §4): max/min of the table over φ at the first θ_h grid values, for a
+    report, docs/method.md, "Diagnostics"): max/min of the table over φ at the first θ_h grid values, for a
     few θ_d, per channel.  The measured mirror peaks differ between orientations, so
     φ_h is a discontinuity at h = z.
     """

@@ -1,4 +1,4 @@
-r"""The extended KES interpolation over orientation (paper eq. 1–2, DESIGN §3).
+r"""The extended KES interpolation over orientation (paper eq. 1–2, docs/method.md, "Interpolation over orientation").
 
 KES treats a fabric as an orthotropic sheet.  Write :math:`K(\psi) = 1/\rho(\psi, \gamma)`
 for a fixed deviation γ.  Sakaguchi's extension interpolates K between the warp (0),
@@ -10,14 +10,14 @@ bias (π/4) and weft (π/2) like the directional compliance of an orthotropic pl
     \qquad G' = 4K_{45} - K_0 - K_{90}                      \tag{1–2}
 
 With the other bias π3/4 measured as well, the lowest-order term that breaks the
-φ → π − φ symmetry gives the 4-orientation form (DESIGN §3)
+φ → π − φ symmetry gives the 4-orientation form (docs/method.md, "Interpolation over orientation")
 
 .. math::
 
     K(\phi) = K_0 c^4 + B c^2 s^2 + K_{90} s^4 + D c s,\quad
     B = 2(K_{45}+K_{135}) - K_0 - K_{90},\quad D = K_{45} - K_{135}.
 
-On the whole circle of deviation azimuths (DESIGN §4) the eight half-samples at
+On the whole circle of deviation azimuths (docs/method.md, "From the table to a BRDF") the eight half-samples at
 k·π/4 are interpolated by an even part (the average of the two halves, exactly the
 form above: span {1, cos 2φ, sin 2φ, cos 4φ}) plus an odd part (half their
 difference, span {cos φ, sin φ, cos 3φ, sin 3φ}).  With three orientations the even
@@ -74,7 +74,7 @@ def kes3(K0, K45, K90, phi):
 
 
 def kes4(K0, K45, K90, K135, phi):
-    r"""The 4-orientation form (DESIGN §3); equals :func:`kes3` when K45 = K135.
+    r"""The 4-orientation form (docs/method.md, "Interpolation over orientation"); equals :func:`kes3` when K45 = K135.
 
     .. math:: K = K_0 c^4 + B c^2 s^2 + K_{90} s^4 + D c s
 
@@ -148,7 +148,7 @@ def interpolate_circle(K_half, phi, orientations: int = 4) -> np.ndarray:
 
 
 def interpolate_circle_log(q_half, phi, orientations: int = 4) -> np.ndarray:
-    """Fallback (DESIGN §3): the same interpolation applied to log q; returns q(φ) > 0.
+    """Fallback (docs/method.md, "Interpolation over orientation"): the same interpolation applied to log q; returns q(φ) > 0.
 
     log q(φ) is held within the range of the used half-samples (per row and channel): the
     trigonometric interpolant overshoots between them, and in log space an overshoot is a

@@ -1,4 +1,4 @@
-r"""The anisotropic reflection model: the table ρ(φ, γ) (paper STEP 3, DESIGN §4).
+r"""The anisotropic reflection model: the table ρ(φ, γ) (paper STEP 3, docs/method.md, "From the table to a BRDF").
 
 :func:`fit` turns in-plane measurements at ψ = 0, π/4, π/2 (and 3π/4) into a
 table of the lobe quantity
@@ -8,7 +8,7 @@ table of the lobe quantity
 (w the foreshortening weight, :func:`kesbrdf.models.mappings.foreshortening`: paper eq. 3's
 √(cos θ_i cos θ_r), bounded toward grazing angles; ``parameters["normalisation"]``)
 over the whole circle of deviation azimuths φ ∈ [0, 2π) and deviations γ ≥ 0, plus a
-Lambertian body term c (DESIGN §4).  The table *is* the model: every consumer (numpy
+Lambertian body term c (docs/method.md, "The body term").  The table *is* the model: every consumer (numpy
 BRDF, Mitsuba plugin, browser viewer) evaluates it by the same bilinear lookup
 (``docs/formats.md``).
 
@@ -16,7 +16,7 @@ How the table is filled
 -----------------------
 1. Signed γ = θ_r − θ_i of each in-plane sample at orientation ψ becomes a
    half-sample at deviation azimuth ψ (γ > 0) or ψ + π (γ < 0) with |γ|; at γ = 0
-   both halves get the same sample (the plane of incidence, DESIGN §4).
+   both halves get the same sample (the plane of incidence, docs/method.md, "From the table to a BRDF").
 2. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
    samples (the darkest reading is an upper bound of the diffuse floor; noise makes
    it a slight underestimate, which only moves energy to the lobe); ``"none"`` is c = 0
@@ -28,7 +28,7 @@ How the table is filled
    (linear in q; the grid contains every measured |γ| when they are uniformly
    spaced, so the measured values are kept exactly).
 5. For every γ of the grid, K = 1/q is interpolated over φ by :mod:`kesbrdf.models.interpolation`.
-   Where K(φ) ≤ 0 somewhere (the hazard of DESIGN §3, common on satins), the default
+   Where K(φ) ≤ 0 somewhere (the hazard of docs/method.md, "Interpolation over orientation", common on satins), the default
    ``fallback="log"`` interpolates log q instead at that γ, records it in
    ``diagnostics["fallback_gamma_deg"]`` and adds a one-line warning naming the γ
    affected to ``diagnostics["warnings"]``; ``fallback="error"`` (``kesbrdf fit
@@ -62,11 +62,18 @@ from kesbrdf.models.mappings import (
     to_phi_gamma,
 )
 from kesbrdf.measure.measurement import Measurement
+from kesbrdf.models.table import (  # noqa: F401  (lookup, check_*: the table toolkit, re-exported)
+    GRID_TOL,
+    check_uniform_grid,
+    check_values,
+    gamma0_behaviour,
+    lookup,
+    lookup_unit,
+)
 
 __all__ = [
     "Model",
     "fit",
-    "load",
     "lookup",
     "INTERPOLATIONS",
     "FALLBACKS",
@@ -93,8 +100,6 @@ MAX_GAMMA_STEP = math.radians(1.0)
 
 
 _ARRAYS = ("phi_grid", "gamma_grid", "table", "body", "gamma_nodes", "q_nodes")
-#: Grid values may differ from the uniform grid the lookup assumes by this much (radians).
-GRID_TOL = 1e-9
 
 
 @register
@@ -120,6 +125,8 @@ class Model(ReflectanceModel):
     kind: ClassVar[str] = "kes"
     mappings: ClassVar[tuple[str, ...]] = MAPPINGS
     array_names: ClassVar[tuple[str, ...]] = _ARRAYS
+    #: kind="auto" compares the paper-protocol KES choice with the prior by leave-one-orientation-out
+    auto_compare: ClassVar[str | None] = "loo"
     fit_options: ClassVar[tuple[str, ...]] = (
         "orientations", "fallback", "body", "noise_floor", "interpolation", "n_phi", "gamma_step",
         "normalisation", "extrapolation",
@@ -214,61 +221,48 @@ class Model(ReflectanceModel):
         return q
 
     def lookup_unit(self, phi, gamma) -> np.ndarray:
-        """Bilinear lookup for φ ∈ [0, 2π], γ ≥ 0 (finite), shape (n, C).
-
-        The table is read flattened with ``np.take``; see :func:`lookup` for the
-        general version.
-        """
-        T = self.table
-        n_phi, n_gamma, C = T.shape
-        u = phi * (n_phi / (2 * np.pi))
-        i0 = u.astype(np.intp)  # u ≥ 0: truncation is floor
-        fu = u - i0
-        i0[i0 >= n_phi] -= n_phi
-        i1 = i0 + 1
-        i1[i1 == n_phi] = 0
-        dgamma = self.gamma_grid[1] - self.gamma_grid[0]
-        v = np.minimum(gamma, self.gamma_grid[-1]) / dgamma
-        j0 = np.minimum(v.astype(np.intp), n_gamma - 1)
-        fv = v - j0
-        dj = (j0 < n_gamma - 1).astype(np.intp)
-        i0 *= n_gamma
-        i0 += j0
-        i1 *= n_gamma
-        i1 += j0
-        if C == 1:
-            flat = T.reshape(-1)
-            t00 = np.take(flat, i0)
-            t10 = np.take(flat, i1)
-            i0 += dj
-            i1 += dj
-            t01 = np.take(flat, i0)
-            t11 = np.take(flat, i1)
-        else:
-            flat = T.reshape(-1, C)
-            fu = fu[:, None]
-            fv = fv[:, None]
-            t00 = np.take(flat, i0, axis=0)
-            t10 = np.take(flat, i1, axis=0)
-            i0 += dj
-            i1 += dj
-            t01 = np.take(flat, i0, axis=0)
-            t11 = np.take(flat, i1, axis=0)
-        gu = 1.0 - fu
-        t00 *= gu
-        t10 *= fu
-        t00 += t10
-        t01 *= gu
-        t11 *= fu
-        t01 += t11
-        t00 *= 1.0 - fv
-        t01 *= fv
-        t00 += t01
-        return t00.reshape(-1, C)
+        """Bilinear lookup for φ ∈ [0, 2π], γ ≥ 0 (finite), shape (n, C) (:func:`kesbrdf.models.table.lookup_unit`)."""
+        return lookup_unit(self, phi, gamma)
 
     def mirror_behaviour(self) -> dict:
         """How the lobe varies with φ as γ → 0 (:func:`gamma0_behaviour`)."""
         return gamma0_behaviour(self)
+
+    # -- capabilities (kinds contract) -------------------------------------------
+    @property
+    def has_table(self) -> bool:
+        return True
+
+    def table_view(self, n_phi=None, n_gamma=None) -> "Model":
+        """The model itself: its table is the (φ, γ) table."""
+        return self
+
+    @classmethod
+    def tabulate(cls, model, n_phi=None, n_gamma=None) -> "Model":
+        """The (φ, γ) table of any model through its evaluation (:func:`kesbrdf.models.table.tabulate`)."""
+        from kesbrdf.models.table import tabulate
+
+        fields = tabulate(model, n_phi, n_gamma)
+        fields["kesbrdf_version"] = fields["kesbrdf_version"] or cls.kesbrdf_version
+        return cls(**fields)
+
+    def describe(self) -> str:
+        p, d = self.parameters, self.diagnostics
+        table = (f"kes table {self.phi_grid.size} x {self.gamma_grid.size} over (phi, gamma) up to "
+                 f"{math.degrees(self.gamma_max):.3g} deg, channels {', '.join(self.channels)}")
+        if p.get("tabulated_from"):
+            return f"{table}, tabulated from a {p['tabulated_from']!r} model"
+        if p.get("fit") == "scattered":
+            return (f"scattered fit of {d.get('n_used', '?')} samples, warp at {float(p.get('warp_offset_deg', 0.0)):.1f} deg "
+                    f"({p.get('warp_offset_rule', 'given')}), symmetry {p.get('symmetry')}, body {self.body.tolist()}; {table}")
+        return f"{self.orientations} orientations, {len(self.gamma_nodes)} gamma nodes; {table}"
+
+    def refit_options(self) -> dict:
+        """As the base class, without ``orientations`` (the subset says how many it has)."""
+        options = super().refit_options()
+        if "_fit_memory" not in self.__dict__:
+            options.pop("orientations", None)
+        return options
 
     # -- model file (kinds contract) -------------------------------------------
     def to_payload(self):
@@ -356,75 +350,9 @@ class Model(ReflectanceModel):
         return mask, "; ".join(parts)
 
 
-def check_uniform_grid(grid: np.ndarray, step: float, name: str, source=None) -> None:
-    """A one-line :class:`ModelError` unless ``grid`` is k·step, k = 0, 1, ... (within GRID_TOL)."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        expected = np.arange(grid.size) * step
-    if not (np.all(np.isfinite(grid)) and np.allclose(grid, expected, rtol=0, atol=GRID_TOL)):
-        raise ModelError(
-            f"{where(source)}{name}: expected the uniform grid k*{step:.6g} from 0 ({grid.size} values), "
-            f"got {grid[:3].tolist()}..."
-        )
-
-
-def check_values(a: np.ndarray, name: str, source=None) -> None:
-    """A one-line :class:`ModelError` unless ``a`` is finite and ≥ 0."""
-    bad = ~(np.isfinite(a) & (a >= 0))
-    if bad.any():
-        first = a[bad].flat[0]
-        raise ModelError(
-            f"{where(source)}{name}: expected finite non-negative values, got {int(bad.sum())} bad value(s), "
-            f"e.g. {float(first)!r}"
-        )
-
-
-def lookup(model, phi, gamma) -> np.ndarray:
-    """Bilinear lookup of the lobe table q at (φ, γ) (docs/formats.md, step 2).
-
-    Parameters
-    ----------
-    phi, gamma : array_like
-        Radians; φ is periodic, γ is clamped to [0, γ_max].  Broadcast together.
-        NaN in gives NaN out.
-
-    Returns
-    -------
-    ndarray, shape (..., C)
-    """
-    phi, gamma = np.broadcast_arrays(np.asarray(phi, float), np.asarray(gamma, float))
-    shape = phi.shape
-    phi = np.mod(phi.reshape(-1), 2 * np.pi)
-    gamma = np.clip(gamma.reshape(-1), 0.0, None)
-    nan = ~(np.isfinite(phi) & np.isfinite(gamma))
-    # any table holder (phi_grid, gamma_grid, table) works, e.g. the prior's residual
-    unit = model.lookup_unit if hasattr(model, "lookup_unit") else Model.lookup_unit.__get__(model)
-    q = unit(np.where(nan, 0.0, phi), np.where(nan, 0.0, gamma))
-    q[nan] = np.nan
-    return q.reshape(shape + (model.table.shape[-1],))
-
-
-def gamma0_behaviour(model) -> dict:
-    """How the lobe varies with φ as γ → 0: the four measured peaks differ, so φ is
-    a discontinuity at the mirror direction (DESIGN §4).  Reports max/min of q over φ
-    at the first grid γ values."""
-    out = {}
-    for gamma in model.gamma_grid[:3]:
-        q = lookup(model, model.phi_grid, np.full(model.phi_grid.shape, gamma))
-        qmin = np.maximum(q.min(axis=0), np.finfo(float).tiny)
-        out[f"{np.degrees(gamma):.3g}"] = (q.max(axis=0) / qmin).tolist()
-    return {"q_max_over_min_by_gamma_deg": out, "measured_peaks": model.diagnostics.get("gamma0_peaks", {})}
-
-
-def load(path) -> Model:
-    """Read a model file written by :meth:`Model.save`."""
-    from kesbrdf.io.model_file import load_model
-
-    return load_model(path)
-
-
 # ---------------------------------------------------------------------------------
 def fallback_warning(what: str, values_deg, n_total: int | None = None) -> str:
-    """The one-line warning of a log fallback (DESIGN §3), naming the angles affected."""
+    """The one-line warning of a log fallback (docs/method.md, "Interpolation over orientation"), naming the angles affected."""
     v = sorted({round(float(x), 3) for x in values_deg})
     if len(v) <= 6:
         named = ", ".join(f"{x:g}" for x in v)
@@ -526,7 +454,7 @@ def fit(
         3 reproduces the paper's eq. 1–2; 4 (default when 135° was measured) uses
         all four orientations.
     fallback : {"log", "error"}
-        What to do where K(φ) ≤ 0 between orientations (DESIGN §3): interpolate log ρ
+        What to do where K(φ) ≤ 0 between orientations (docs/method.md, "Interpolation over orientation"): interpolate log ρ
         there with a recorded warning (default), or raise :class:`KESError`.
     body : "auto", "none" or float
         Lambertian body term c in 1/sr (module docstring).

@@ -1,6 +1,6 @@
 r"""Direction mappings: from a pair (wi, wr) to the coordinates a model table is read at.
 
-One module below every model kind (DESIGN §4, §6), so that the kinds, the BRDF front
+One module below every model kind (docs/method.md, "From the table to a BRDF"; docs/architecture.md, "Layers"), so that the kinds, the BRDF front
 end and the consumers share the same definitions and nothing imports another module's
 private helpers.
 
@@ -37,7 +37,7 @@ every incidence.  It is symmetric in (θ_i, θ_r): reciprocity is kept.
 
 Where wi + wr has no component in the fabric plane (the mirror direction for
 ``deviation``, h ∥ z for the half-vector mappings), φ is the azimuth of the plane of
-incidence, (wr − wi) projected (DESIGN §4).
+incidence, (wr − wi) projected (docs/method.md, "From the table to a BRDF").
 
 Directions at the public API
 ----------------------------
@@ -207,7 +207,7 @@ def paper_phi_gamma(theta_i, phi_i, theta_r, phi_r):
     (sin β is clamped at :data:`PAPER_MIN_SIN_BETA`) and at grazing angles
     (cos θ → 0), and its φ depends on the sum of the azimuths, so the highlight it
     predicts is not a lobe around the mirror direction once the fabric is rotated.
-    Signed γ < 0 reads the table at azimuth φ + π (DESIGN §4).
+    Signed γ < 0 reads the table at azimuth φ + π (docs/method.md, "From the table to a BRDF").
     """
     phi = np.mod(np.pi / 2 - (phi_i + phi_r), 2 * np.pi)
     gamma = theta_r - theta_i

@@ -1,4 +1,4 @@
-r"""Fit the extended-KES model to scattered gonio data (DESIGN §4, last paragraph).
+r"""Fit the extended-KES model to scattered gonio data (docs/method.md, "The body term").
 
 The paper builds its table from in-plane curves at ψ = 0, π/4, π/2, 3π/4.  Real data
 sets (CUReT, a lab's own gonio archive) hold scattered configurations instead, in a
@@ -21,7 +21,7 @@ plus a Lambertian body c ≥ 0.  The table is then built exactly as
    grazing angles; zero beyond γ = π/2);
 2. linear interpolation in q onto the table's uniform γ grid;
 3. KES on K = 1/q over the whole circle of deviation azimuths
-   (:func:`kesbrdf.models.interpolation.interpolate_circle`, through ``kesbrdf.models.kes._fill_table`` with
+   (:func:`kesbrdf.models.interpolation.interpolate_circle`, through :func:`kesbrdf.models.kes.fill_table` with
    ``fallback="log"`` where K(φ) ≤ 0);
 4. body split: lobe = max(q(φ, γ) − c·w(γ), 0).
 
@@ -76,7 +76,7 @@ Measured on real data
 ``benchmarks/bench_real_data.py`` fits the eleven CUReT fabrics with 5 seeded folds:
 lobe + body beats the isotropic curve (+ body) and the anisotropic Ward on every
 fabric in held-out log-RMSE and RMSE, while the pure lobe (``body="none"``) rarely
-beats the isotropic curve: DESIGN §4's observation, reproduced.  The ``deviation``
+beats the isotropic curve: the observation of docs/method.md, "The body term", reproduced.  The ``deviation``
 mapping fits every fabric better than ``halfvector`` (the reverse holds for Ward
 lobes, which are half-vector functions by construction).
 
@@ -666,6 +666,8 @@ class ScatteredFit:
     """
 
     kind = "kes"
+    #: kind="auto" compares the scattered fit with the prior by k-fold cross-validation
+    auto_compare = "kfold"
     fit_options = ("warp_deg", "symmetry", "body", "smooth_gamma", "smooth_phi", "loss_scale",
                    "gamma_nodes_deg", "offset_step_deg", "max_nfev", "mapping")
 
@@ -718,7 +720,7 @@ def fit_ward(m: Measurement, warp_deg: float | None = None, loss_scale: float = 
              offset_step_deg: float = 15.0, channel: int = 0):
     """Anisotropic Ward (α_x, α_y, ρ_d, ρ_s, warp) by robust least squares on ln f_r.
 
-    The baseline of DESIGN §4's comparison, fitted on the same terms as
+    The baseline of the comparison in docs/method.md, "The body term", fitted on the same terms as
     :func:`fit_scattered` (same residual, ε and loss).  The warp azimuth is searched on a
     grid over [0°, 180°) (every start then refined jointly with the other parameters).
 

@@ -22,16 +22,17 @@ import html
 import json
 import math
 import platform
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from kesbrdf._atomic import write_text
 from kesbrdf._version import __version__
-from kesbrdf.errors import KesbrdfError
+from kesbrdf.errors import KesbrdfError, ModelError
 from kesbrdf.plotting.save import jsonable, describe, figure_bytes, provenance, save_figure
 
-__all__ = ["REPORT_FIGURES", "build_report", "write_report", "collect"]
+__all__ = ["REPORT_FIGURES", "ReportInputs", "build_report", "write_report", "collect"]
 
 #: Figures a report shows, in order, with their captions.
 REPORT_FIGURES = {
@@ -244,18 +245,27 @@ def _render(v, path: tuple = (), depth: int = 0) -> str:
 def _model_summary(model) -> dict:
     if model is None:
         return {}
+    try:
+        table = model.table_view()  # the (φ, γ) table, or the tabulated view of a kind without one
+    except ModelError as exc:  # a kind that cannot be tabulated: say so, the rest still runs
+        table, no_table = None, str(exc)
     out = {
         "kind": model.kind,
+        "model": model.describe(),
         "channels": ", ".join(model.channels),
         "orientations": model.parameters.get("orientations"),
-        "table shape": " × ".join(str(n) for n in np.shape(model.table)),
+        "(φ, γ) table shape": (" × ".join(str(n) for n in np.shape(table.table))
+                               + ("" if model.has_table else " (tabulated through evaluate)"))
+        if table is not None else f"none: {no_table}",
     }
-    if model.kind == "kes":
-        out["table (n_phi × n_gamma)"] = f"{len(model.phi_grid)} × {len(model.gamma_grid)}"
-        out["γ_max (°)"] = round(math.degrees(float(np.max(model.gamma_grid))), 6)
+    if table is None:
+        return {**out, "input": (model.input_info or {}).get("name"), "sample": (model.input_info or {}).get("sample")}
+    if model.has_table:
+        out["table (n_phi × n_gamma)"] = f"{len(table.phi_grid)} × {len(table.gamma_grid)}"
+        out["γ_max (°)"] = round(math.degrees(float(np.max(table.gamma_grid))), 6)
     return {
         **out,
-        "body c (1/sr)": np.asarray(model.body, float).tolist(),
+        "body c of the (φ, γ) table (1/sr)": np.asarray(table.body, float).tolist(),
         "input": (model.input_info or {}).get("name"),
         "sample": (model.input_info or {}).get("sample"),
     }
@@ -390,25 +400,121 @@ def _looks_html(looks) -> str:
     return "<h2 id=exports>Exports in their renderers</h2>" + intro + "<ul>" + "".join(lines) + "</ul>" + "".join(items)
 
 
-def build_report(
-    model=None,
-    measurement=None,
-    reference=None,
-    metrics=None,
-    diagnostics=None,
-    title: str = "kesbrdf report",
-    figures=tuple(REPORT_FIGURES),
-    figure_dir=None,
-    figure_format: str = "png",
-    dpi: int = 90,
-    figure_options: dict | None = None,
-    comparisons=None,
-    plan=None,
-    baselines=None,
-    prior_model=None,
-    looks=None,
-) -> str:
-    """The report as one HTML string (see :func:`write_report` for the parameters)."""
+@dataclass
+class ReportInputs:
+    """Everything one report shows (:func:`build_report`, :func:`write_report`).
+
+    Attributes
+    ----------
+    model : ReflectanceModel, optional
+        The model the report is about; named at the top with ``model_sha256`` and
+        ``selection``.
+    measurement : Measurement, optional
+    reference : callable f(wi, wr) -> (..., C), optional
+        Dense reference for Fig. 6.
+    metrics : dict, optional
+        Any nested dict of numbers/strings/lists, e.g. ``{"round_trip": validate(...),
+        "leave_one_orientation_out": ..., "reference": compare_reference(...)}``.
+    diagnostics : dict, optional
+        e.g. :func:`kesbrdf.validate.diagnostics.diagnose` output; its albedo grid gives a figure.
+    title : str
+    figures : sequence of str
+        Figure names (:data:`REPORT_FIGURES`); a figure whose inputs are missing is
+        replaced by a one-line note.
+    figure_dir : str or PathLike, optional
+        Also save each figure there as ``fig<name>.<figure_format>`` (with provenance).
+    figure_format : str
+    dpi : int
+        Resolution of the embedded PNGs.
+    figure_options : dict, optional
+        Figure name -> keyword arguments for its ``figure_*`` builder.
+    comparisons : sequence of dict, optional
+        Reference-vs-model render panels to embed (``panel`` path + numbers, as returned
+        by :func:`kesbrdf.render.compare.compare_render`); missing panels are skipped.
+    plan : dict, optional
+        :meth:`kesbrdf.measure.planning.PlanResult.to_dict`: drawn as the protocol-planning plot.
+    baselines : dict, optional
+        :func:`kesbrdf.validate.baselines.compare_models` (+ ``verdicts``): the default-vs-baselines table.
+    prior_model : FibrePriorModel, optional
+        A fibre-prior model shown beside ``model``: its Fig. 6 and uncertainty map.
+        The model comparison table (``model.diagnostics["fit_report"]["comparison"]``)
+        and, for a model carrying σ, its uncertainty map are added automatically
+        (:mod:`kesbrdf.plotting.report_prior`).
+    looks : dict, optional
+        :func:`kesbrdf.export.looks.check_looks` output: the section "Exports in their
+        renderers" (each export in its renderer beside the plugin render, with FLIP).
+    model_sha256 : str, optional
+        The model's content hash (:func:`kesbrdf.pipeline.model_sha256`), shown at the top.
+    selection : dict, optional
+        The fit's selection report (:meth:`kesbrdf.fitting.FitReport.to_dict`): why this
+        model; default ``model.diagnostics["fit_report"]`` when the model carries one.
+    notes : sequence of str
+        One-line notes shown under the model (e.g. a view that could not be drawn).
+    """
+
+    model: object = None
+    measurement: object = None
+    reference: object = None
+    metrics: dict | None = None
+    diagnostics: dict | None = None
+    title: str = "kesbrdf report"
+    figures: tuple = tuple(REPORT_FIGURES)
+    figure_dir: object = None
+    figure_format: str = "png"
+    dpi: int = 90
+    figure_options: dict | None = None
+    comparisons: list | None = None
+    plan: dict | None = None
+    baselines: dict | None = None
+    prior_model: object = None
+    looks: dict | None = None
+    model_sha256: str | None = None
+    selection: dict | None = None
+    notes: list = field(default_factory=list)
+
+
+def _selection_of(inputs: ReportInputs) -> dict | None:
+    if inputs.selection is not None:
+        return inputs.selection
+    d = getattr(inputs.model, "diagnostics", None)
+    sel = d.get("fit_report") if isinstance(d, dict) else None
+    return sel if isinstance(sel, dict) else None
+
+
+def _model_header_html(inputs: ReportInputs) -> str:
+    """The first lines of the report: which model (kind, content hash) and why it was chosen."""
+    model = inputs.model
+    if model is None:
+        return ""
+    digest = inputs.model_sha256
+    if digest is None:
+        from kesbrdf.pipeline import model_sha256
+
+        digest = model_sha256(model)
+    sel = _selection_of(inputs) or {}
+    rows = [("model kind", model.kind), ("content sha256", digest or "—")]
+    if sel.get("reason"):
+        rows.append(("why this model", sel["reason"]))
+    if sel.get("rows_total"):
+        rows.append(("rows used", f"{sel.get('rows_used')} of {sel.get('rows_total')}"))
+    comparison = sel.get("comparison") or {}
+    if comparison.get("kept"):
+        rows.append(("kept by comparison", comparison["kept"]))
+    body = "".join(f"<tr><td class=key>{html.escape(k)}</td><td class=txt>{html.escape(str(v))}</td></tr>"
+                   for k, v in rows)
+    notes = "".join(f'<p class="note">{html.escape(str(n))}</p>' for n in inputs.notes)
+    return (f"<section id=model-chosen><p><b>This report is about one model</b>: every figure, metric, "
+            f"render and export below uses it.</p><table>{body}</table>{notes}</section>")
+
+
+def build_report(inputs: ReportInputs | None = None) -> str:
+    """The report as one HTML string (:class:`ReportInputs` says what it shows)."""
+    inputs = inputs or ReportInputs()
+    model, measurement, reference = inputs.model, inputs.measurement, inputs.reference
+    metrics, diagnostics, title, figures = inputs.metrics, inputs.diagnostics, inputs.title, inputs.figures
+    figure_dir, figure_format, dpi = inputs.figure_dir, inputs.figure_format, inputs.dpi
+    figure_options, comparisons, plan, baselines = inputs.figure_options, inputs.comparisons, inputs.plan, inputs.baselines
+    prior_model, looks = inputs.prior_model, inputs.looks
     from kesbrdf.plotting.figures import make_figure
 
     record = provenance(model, measurement, reference, report=True, figures=list(figures))
@@ -422,6 +528,7 @@ def build_report(
         f"<title>{html.escape(title)}</title><style>{_CSS}</style></head><body>",
         f"<h1>{html.escape(title)}</h1>",
         f"<p>kesbrdf {html.escape(__version__)} · extended-KES anisotropic BRDF (Takeda et al.)</p>",
+        _model_header_html(inputs),
     ]
     # -- key numbers
     highlights = _highlights(metrics, diagnostics)
@@ -498,75 +605,9 @@ def build_report(
     return "".join(parts)
 
 
-def write_report(
-    path,
-    model=None,
-    measurement=None,
-    reference=None,
-    metrics=None,
-    diagnostics=None,
-    title: str = "kesbrdf report",
-    figures=tuple(REPORT_FIGURES),
-    figure_dir=None,
-    figure_format: str = "png",
-    dpi: int = 90,
-    figure_options: dict | None = None,
-    comparisons=None,
-    plan=None,
-    baselines=None,
-    prior_model=None,
-    looks=None,
-) -> Path:
-    """Write one self-contained HTML report atomically.
-
-    Parameters
-    ----------
-    path : str or PathLike
-        Output ``.html`` file.
-    model : Model, optional
-    measurement : Measurement, optional
-    reference : callable f(wi, wr) -> (..., C), optional
-        Dense reference for Fig. 6.
-    metrics : dict, optional
-        Any nested dict of numbers/strings/lists, e.g. ``{"round_trip": validate(...),
-        "leave_one_orientation_out": ..., "reference": compare_reference(...)}``.
-    diagnostics : dict, optional
-        e.g. :func:`kesbrdf.validate.diagnostics.diagnose` output; its albedo grid gives a figure.
-    title : str
-    figures : sequence of str
-        Figure names (:data:`REPORT_FIGURES`); a figure whose inputs are missing is
-        replaced by a one-line note.
-    figure_dir : str or PathLike, optional
-        Also save each figure there as ``fig<name>.<figure_format>`` (with provenance).
-    dpi : int
-        Resolution of the embedded PNGs.
-    figure_options : dict, optional
-        Figure name -> keyword arguments for its ``figure_*`` builder.
-    comparisons : sequence of dict, optional
-        Reference-vs-model render panels to embed (``panel`` path + numbers, as returned
-        by :func:`kesbrdf.render.compare.compare_render`); missing panels are skipped.
-    plan : dict, optional
-        :meth:`kesbrdf.measure.planning.PlanResult.to_dict`: drawn as the protocol-planning plot.
-    baselines : dict, optional
-        :func:`kesbrdf.validate.baselines.compare_models` (+ ``verdicts``): the default-vs-baselines table.
-    prior_model : FibrePriorModel, optional
-        A fibre-prior model shown beside ``model``: its Fig. 6 and uncertainty map.
-        The model comparison table (``model.diagnostics["fit_report"]["comparison"]``)
-        and, for a model carrying σ, its uncertainty map are added automatically
-        (:mod:`kesbrdf.plotting.report_prior`).
-    looks : dict, optional
-        :func:`kesbrdf.export.looks.check_looks` output: the section "Exports in their
-        renderers" (each export in its renderer beside the plugin render, with FLIP).
-
-    Returns
-    -------
-    Path
-    """
-    text = build_report(
-        model, measurement, reference, metrics, diagnostics, title, figures, figure_dir,
-        figure_format, dpi, figure_options, comparisons, plan, baselines, prior_model, looks,
-    )
-    return write_text(path, text)
+def write_report(path, inputs: ReportInputs | None = None) -> Path:
+    """Write one self-contained HTML report (:class:`ReportInputs`) to ``path`` atomically."""
+    return write_text(path, build_report(inputs))
 
 
 def _matplotlib_version() -> str | None:

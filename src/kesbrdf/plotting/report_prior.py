@@ -138,7 +138,7 @@ def sections_html(model=None, measurement=None, reference=None, plan=None, basel
     if model is not None and has_uncertainty(model):
         body += "<h3>Uncertainty</h3>" + _img(figure_uncertainty(model, reference), "6-uncertainty", caption, dpi)
     elif model is not None:
-        body += (f'<p class="note">The model (kind {html.escape(str(getattr(model, "kind", "?")))}) carries no σ: '
+        body += (f'<p class="note">The model (kind {html.escape(str(model.kind))}) carries no σ: '
                  "a KES table reproduces the samples exactly and its file holds no noise estimate"
                  + ("; the fibre-prior model below shows one." if prior_model is not None else ".") + "</p>")
     if prior_model is not None and prior_model is not model:

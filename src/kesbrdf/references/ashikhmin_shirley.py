@@ -40,6 +40,8 @@ import math
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.optics import schlick_weight
+from kesbrdf.references.base import ReferenceBRDF, default_channels
 
 __all__ = ["AshikhminShirley"]
 
@@ -48,15 +50,7 @@ class AshikhminShirleyError(KesbrdfError):
     """Invalid parameters for the Ashikhmin–Shirley BRDF."""
 
 
-def _default_channels(count: int) -> tuple[str, ...]:
-    if count == 1:
-        return ("value",)
-    if count == 3:
-        return ("R", "G", "B")
-    return tuple(f"c{k}" for k in range(count))
-
-
-class AshikhminShirley:
+class AshikhminShirley(ReferenceBRDF):
     """Ashikhmin–Shirley anisotropic Phong BRDF, callable as ``f(wi, wr) -> (..., C)``.
 
     .. math::
@@ -89,6 +83,8 @@ class AshikhminShirley:
         three, otherwise ``("c0", "c1", ...)``.
     """
 
+    error = AshikhminShirleyError
+
     def __init__(self, n_u: float, n_v: float, R_s=0.05, R_d=0.5, channels=None) -> None:
         for name, value in (("n_u", n_u), ("n_v", n_v)):
             if not (np.isscalar(value) and np.isfinite(value) and value >= 0):
@@ -119,7 +115,7 @@ class AshikhminShirley:
         self.R_s = R_s.copy()
         self.R_d = R_d.copy()
         if channels is None:
-            channels = _default_channels(self.R_s.size)
+            channels = default_channels(self.R_s.size)
         channels = tuple(str(c) for c in channels)
         if len(channels) != self.R_s.size:
             raise AshikhminShirleyError(
@@ -143,28 +139,8 @@ class AshikhminShirley:
             f"R_s={self.R_s.tolist()}, R_d={self.R_d.tolist()})"
         )
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        """Evaluate f_r for ``wi`` (to the light) and ``wr`` (to the viewer).
-
-        Parameters
-        ----------
-        wi, wr : array_like, shape (..., 3)
-            Unit vectors in the fabric frame; leading axes broadcast.
-
-        Returns
-        -------
-        ndarray, shape (..., C)
-            f_r in 1/sr. Zero when either direction is at or below the horizon; NaN
-            where an input component is NaN.
-        """
-        wi = np.asarray(wi, dtype=float)
-        wr = np.asarray(wr, dtype=float)
-        if wi.ndim == 0 or wr.ndim == 0 or wi.shape[-1] != 3 or wr.shape[-1] != 3:
-            raise AshikhminShirleyError(
-                f"AshikhminShirley: expected direction arrays of shape (..., 3), got "
-                f"{np.shape(wi)} and {np.shape(wr)}"
-            )
-        wi, wr = np.broadcast_arrays(wi, wr)
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r (n, C) of unit pairs above the horizon (eq. 1); edges: :class:`ReferenceBRDF`."""
         cos_i = wi[..., 2]
         cos_r = wr[..., 2]
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -188,13 +164,8 @@ class AshikhminShirley:
                 * lobe / (k_dot_h * np.maximum(cos_i, cos_r))
             )
             # Eq. 3: Schlick's Fresnel, per channel
-            schlick = (1.0 - k_dot_h) ** 5
-            fresnel = self.R_s + (1.0 - self.R_s) * schlick[..., None]
+            fresnel = self.R_s + (1.0 - self.R_s) * schlick_weight(k_dot_h)[..., None]
             # Eq. 5: coupled diffuse term, per channel
             diffuse_shape = (1.0 - (1.0 - 0.5 * cos_i) ** 5) * (1.0 - (1.0 - 0.5 * cos_r) ** 5)
             diffuse = (28.0 / (23.0 * math.pi)) * self.R_d * (1.0 - self.R_s) * diffuse_shape[..., None]
-            f = spec[..., None] * fresnel + diffuse
-        above = (cos_i > 0) & (cos_r > 0)
-        f = np.where(above[..., None], f, 0.0)
-        nan_in = np.isnan(wi).any(axis=-1) | np.isnan(wr).any(axis=-1)
-        return np.where(nan_in[..., None], np.nan, f)
+            return spec[..., None] * fresnel + diffuse

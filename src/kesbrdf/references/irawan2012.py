@@ -116,6 +116,7 @@ import numpy as np
 from scipy.special import i0e
 
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.references.base import ReferenceBRDF
 
 __all__ = [
     "Yarn",
@@ -306,7 +307,7 @@ def staple_integral(hp, wip, wrp, norm_sum, yarn: Yarn, n_u: int = N_U):
     return np.sum(integrand * wu[None, :], axis=1)
 
 
-class Irawan2012:
+class Irawan2012(ReferenceBRDF):
     """Callable far-field IM12 BRDF f_r(wi, wr) -> (..., 3) in 1/sr (module docstring).
 
     Parameters
@@ -374,24 +375,13 @@ class Irawan2012:
         mean = float(np.mean(lobes.sum(axis=0)))  # π·f_spec averaged over cos-weighted pairs, k_s = 1
         return 1.0 / max(mean, 1e-300)
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        wi = np.asarray(wi, float)
-        wr = np.asarray(wr, float)
-        wi, wr = np.broadcast_arrays(wi, wr)
-        shape = wi.shape[:-1]
-        fwi, fwr = wi.reshape(-1, 3), wr.reshape(-1, 3)
-        above = (fwi[:, 2] > 0) & (fwr[:, 2] > 0)
-        nan = np.isnan(fwi).any(-1) | np.isnan(fwr).any(-1)
-        out = np.zeros((fwi.shape[0], 3))
-        idx = np.flatnonzero(above & ~nan)
-        if idx.size:
-            w = self.weave
-            lobes = self.family_lobes(fwi[idx], fwr[idx]) * self.normalisation
-            kd = w.warp_coverage * np.asarray(w.warp.kd) + (1 - w.warp_coverage) * np.asarray(w.weft.kd)
-            spec = lobes[0][:, None] * np.asarray(w.warp.ks)[None] + lobes[1][:, None] * np.asarray(w.weft.ks)[None]
-            out[idx] = (kd[None, :] + spec) / np.pi
-        out[nan] = np.nan
-        return out.reshape(shape + (3,))
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r (n, 3) of unit pairs above the horizon; edges: :class:`ReferenceBRDF`."""
+        w = self.weave
+        lobes = self.family_lobes(wi, wr) * self.normalisation
+        kd = w.warp_coverage * np.asarray(w.warp.kd) + (1 - w.warp_coverage) * np.asarray(w.weft.kd)
+        spec = lobes[0][:, None] * np.asarray(w.warp.ks)[None] + lobes[1][:, None] * np.asarray(w.weft.ks)[None]
+        return (kd[None, :] + spec) / np.pi
 
 
 def _preset(name, warp, weft, coverage, alpha, beta, ss, kd_w, ks_w, kd_f, ks_f):

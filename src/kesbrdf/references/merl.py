@@ -33,6 +33,7 @@ import numpy as np
 
 from kesbrdf.errors import FormatError, where
 from kesbrdf.io.files import read_regular
+from kesbrdf.references.base import ReferenceBRDF
 
 __all__ = ["MERLBinary", "DIMS", "SCALE", "half_diff", "bin_index"]
 
@@ -73,7 +74,7 @@ def bin_index(theta_h, theta_d, phi_d) -> np.ndarray:
     return (i_pd + n_pd * (i_td + n_td * i_th)).astype(np.int64)
 
 
-class MERLBinary:
+class MERLBinary(ReferenceBRDF):
     """A MERL ``.binary`` file as a callable f(wi, wr) -> (..., 3) in 1/sr.
 
     Parameters
@@ -116,16 +117,7 @@ class MERLBinary:
     def params(self) -> dict:
         return {"reference": "merl", "file": self.path.name, "sha256": self.sha256}
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        """f_r(wi, wr) in 1/sr (nearest bin); 0 below the horizon and in missing bins."""
-        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
-        shape = wi.shape[:-1]
-        wi, wr = wi.reshape(-1, 3), wr.reshape(-1, 3)
-        nan = np.isnan(wi).any(axis=1) | np.isnan(wr).any(axis=1)
-        ok = ~nan & (wi[:, 2] > 0) & (wr[:, 2] > 0)
-        f = np.zeros((wi.shape[0], 3))
-        if ok.any():
-            th, _, td, pd = half_diff(wi[ok], wr[ok])
-            f[ok] = np.maximum(self._flat[:, bin_index(th, td, pd)].T, 0.0)
-        f[nan] = np.nan
-        return f.reshape(shape + (3,))
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r (n, 3) in 1/sr (nearest bin) of unit pairs above the horizon; 0 in missing bins."""
+        th, _, td, pd = half_diff(wi, wr)
+        return np.maximum(self._flat[:, bin_index(th, td, pd)].T, 0.0)

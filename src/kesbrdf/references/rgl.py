@@ -13,8 +13,7 @@ Why Mitsuba rather than a numpy reader
 Reconstructing a value means inverting the VNDF warp (a 2-D marginal/conditional
 distribution interpolated over θ_i) to find where the half vector falls in the
 sample grid, then interpolating the stored ratios there.  Mitsuba's plugin is the
-reference implementation of exactly that, it is vectorised (LLVM backend: 1.4 million
-evaluations a second on this 2-core machine) and it is the code that renders these materials.
+reference implementation of exactly that, it is vectorised (LLVM backend) and it is the code that renders these materials.
 A second implementation in numpy would be a re-derivation without a reference to
 check it against.  So this module calls the plugin, variant ``llvm_ad_rgb`` (the one
 :mod:`kesbrdf.render` uses).  It needs the extra ``kesbrdf[render]``.  Without Mitsuba,
@@ -50,6 +49,7 @@ import numpy as np
 from kesbrdf._drjit import import_mitsuba
 from kesbrdf.errors import FormatError, validate_choice, where
 from kesbrdf.io.tensor_file import read_tensor_file
+from kesbrdf.references.base import ReferenceBRDF
 
 __all__ = ["RGLMeasured", "read_tensor_file", "eval_plugin", "load_plugin", "VARIANT", "TENSOR_FIELDS_RGB"]
 
@@ -118,7 +118,7 @@ def eval_plugin(bsdf, w_param, w_out) -> np.ndarray:
     return out.T.reshape(n, 3)
 
 
-class RGLMeasured:
+class RGLMeasured(ReferenceBRDF):
     """An RGL-EPFL measured BRDF as a callable f(wi, wr) -> (..., 3) in 1/sr.
 
     Parameters
@@ -153,6 +153,8 @@ class RGLMeasured:
     """
 
     channels = ("R", "G", "B")
+    #: One Mitsuba call per 2^20 pairs: each call has a fixed cost (kernel launch).
+    chunk = 1 << 20
 
     def __init__(self, path, parameterised_by: str = "light"):
         validate_choice("parameterised_by", parameterised_by, ("light", "viewer"), error=FormatError)
@@ -183,31 +185,8 @@ class RGLMeasured:
             "parameterised_by": self.parameterised_by,
         }
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        """f_r(wi, wr) in 1/sr, shape broadcast(wi, wr)[:-1] + (3,).
-
-        Parameters
-        ----------
-        wi, wr : array_like, shape (..., 3)
-            Unit vectors toward the light and the viewer, fabric frame.
-        """
-        wi = np.asarray(wi, float)
-        wr = np.asarray(wr, float)
-        wi, wr = np.broadcast_arrays(wi, wr)
-        shape = wi.shape[:-1]
-        wi = wi.reshape(-1, 3)
-        wr = wr.reshape(-1, 3)
-        cos_theta_i = wi[:, 2]
-        cos_theta_r = wr[:, 2]
-        nan = np.isnan(wi).any(axis=1) | np.isnan(wr).any(axis=1)
-        above = (cos_theta_i > 0) & (cos_theta_r > 0) & ~nan
-        f = np.zeros((wi.shape[0], 3))
-        if above.any():
-            if self.parameterised_by == "light":
-                w_param, w_out = wi[above], wr[above]
-            else:
-                w_param, w_out = wr[above], wi[above]
-            # Mitsuba's eval includes the foreshortening cosine of wo: divide it out
-            f[above] = eval_plugin(self._bsdf, w_param, w_out) / w_out[:, 2:3]
-        f[nan] = np.nan
-        return f.reshape(shape + (3,))
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r(wi, wr) in 1/sr, (n, 3), of unit pairs above the horizon (edges: :class:`ReferenceBRDF`)."""
+        w_param, w_out = (wi, wr) if self.parameterised_by == "light" else (wr, wi)
+        # Mitsuba's eval includes the foreshortening cosine of wo: divide it out
+        return eval_plugin(self._bsdf, w_param, w_out) / w_out[:, 2:3]

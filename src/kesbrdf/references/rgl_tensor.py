@@ -32,6 +32,7 @@ import numpy as np
 
 from kesbrdf.errors import FormatError, where
 from kesbrdf.io.tensor_file import read_tensor_file
+from kesbrdf.references.base import ReferenceBRDF
 from kesbrdf.references.marginal2d import Marginal2D
 
 __all__ = ["RGLTensorBRDF", "REQUIRED_FIELDS"]
@@ -58,7 +59,7 @@ def _mulsign_neg(a, b):
     return np.where(b >= 0, -a, a)
 
 
-class RGLTensorBRDF:
+class RGLTensorBRDF(ReferenceBRDF):
     """A tensor-file BRDF as a callable f(wi, wr) -> (..., C) in 1/sr (module docstring).
 
     Parameters
@@ -164,16 +165,7 @@ class RGLTensorBRDF:
         out[active] = spec
         return out
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        """f_r(wi, wr) in 1/sr, shape broadcast(wi, wr)[:-1] + (C,); 0 below the horizon."""
-        wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
-        shape = wi.shape[:-1]
-        wi, wr = wi.reshape(-1, 3), wr.reshape(-1, 3)
-        nan = np.isnan(wi).any(axis=1) | np.isnan(wr).any(axis=1)
-        ok = ~nan & (wi[:, 2] > 0) & (wr[:, 2] > 0)
-        f = np.zeros((wi.shape[0], len(self.channels)))
-        if ok.any():
-            w_param, w_out = (wi[ok], wr[ok]) if self.parameterised_by == "light" else (wr[ok], wi[ok])
-            f[ok] = self.eval_cosine(w_param, w_out) / w_out[:, 2:3]
-        f[nan] = np.nan
-        return f.reshape(shape + (len(self.channels),))
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r(wi, wr) in 1/sr, (n, C), of unit pairs above the horizon (edges: :class:`ReferenceBRDF`)."""
+        w_param, w_out = (wi, wr) if self.parameterised_by == "light" else (wr, wi)
+        return self.eval_cosine(w_param, w_out) / w_out[:, 2:3]

@@ -14,10 +14,11 @@ into an average over the visible area.
 Source of the equations
 -----------------------
 The paper's full text could not be read for this implementation; only its abstract was
-available. The equations follow the project notes ``shared/reference/sadeghi2013.md``.
-Those notes rebuild the model from several independent implementations and from one
-secondary transcription that names the paper's equation numbers. The equation numbers
-quoted below are the notes' numbers. The notes mark each statement as consensus [C],
+available. The equations follow implementation notes written for kesbrdf (kept out of
+the repository; this docstring carries what the code depends on). Those notes rebuild
+the model from several independent implementations and from one secondary transcription
+that names the paper's equation numbers. The equation numbers quoted below are the
+notes' numbers. The notes mark each statement as consensus [C],
 single source [S], conflicting [⚠] or unverified [U]. Every [U]/[⚠] place, and the
 choice made here:
 
@@ -52,11 +53,11 @@ choice made here:
 * Spatially varying (textured) use [U]: not modelled. This is a far-field BRDF
   averaged over one weave repeat.
 
-Properties of the published model (notes §7.1), kept rather than fixed
+Properties of the published model (as the notes list them), kept rather than fixed
 ----------------------------------------------------------------------
 * **Not reciprocal.** The per-tangent kernel ``f_s M P`` is exactly symmetric, but Q
   reads ω_r alone and the projection factor is ``cos θ_i / (n·ω_i)``. Over random pairs,
-  the middle 90 % of ``f(i, r)/f(r, i)`` spans about 0.3–3.4 (notes §8 B).
+  the middle 90 % of ``f(i, r)/f(r, i)`` spans about 0.3–3.4.
 * **Not energy-bounded for A = 1.** Directional albedo for a white fabric reaches
   1.3–1.7. Table II's small ``A`` values absorb this, and the real presets stay at
   0.01–0.35 (velvet is the darkest).
@@ -74,9 +75,9 @@ The symmetrised form keeps energy: the real presets' albedo stays below 0.35 ove
 tested view grid (tests/references/test_sadeghi2013.py).
 
 ``reciprocal=False`` gives the published forward model (ω_i = light, ω_r = viewer)
-exactly as written. The golden values of the notes (§8 G) are for that form.
+exactly as written. The golden values of the notes are for that form.
 
-Numerics (notes §7.1.4): the azimuth φ enters through cos φ = (ω·n_t)/ρ and
+Numerics: the azimuth φ enters through cos φ = (ω·n_t)/ρ and
 sin φ = (ω·b)/ρ, with ρ = |(ω·n_t, ω·b)| = cos θ. It is not computed as cos(atan2(·)),
 which loses relative accuracy where cos φ is tiny. Near grazing the two differ by up to
 1e-4 relative; elsewhere they agree to 1e-13. Inputs must be unit vectors.
@@ -101,6 +102,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
+from kesbrdf.optics import fresnel_dielectric
+from kesbrdf.references.base import ReferenceBRDF
 
 __all__ = [
     "Family",
@@ -125,7 +128,7 @@ SIGMA_U = math.radians(20.0)
 #: Names accepted by ``Sadeghi2013(sampling=...)``.
 SAMPLING_METHODS = ("arclength", "control_points")
 
-# Guards of the notes' §7.1.4: cos θ_d → 0 and cos θ_i + cos θ_r → 0 occur only when light
+# Numerical guards: cos θ_d → 0 and cos θ_i + cos θ_r → 0 occur only when light
 # and view run along ±t in opposite senses. There the kernel is zero anyway through M, P
 # or cos θ_i, so the guards only keep the arithmetic finite.
 _COS_THETA_D_MIN = 1e-4
@@ -151,7 +154,7 @@ class Family:
         Relative index of refraction of the fibre, > 1.
     A : tuple of 3 floats
         Linear-RGB volume albedo (the thread colour), ≥ 0. This is a fitted scale, not a
-        bounded albedo (notes §7.1.2).
+        bounded albedo.
     kd : float
         Fraction of the volume scattering that is isotropic in θ, in [0, 1] (Eq. 3).
     gamma_s, gamma_v : float
@@ -250,7 +253,7 @@ class Family:
         """Tangent-offset samples α of this family's tangent curve (radians).
 
         ``"arclength"``: ``n_samples`` midpoint samples uniform in arclength, with linear
-        interpolation along each segment (notes §4.1). ``"control_points"``: the control
+        interpolation along each segment. ``"control_points"``: the control
         points themselves, with ``n_samples`` ignored.
         """
         offsets = np.asarray(self.offsets, float)
@@ -311,7 +314,7 @@ _LINEN = Family.from_deg(
 )
 _SATIN_COLOUR = (1.0, 0.37, 0.3)
 
-#: Table II of the paper (via the notes §5.1), keyed by preset name.
+#: Table II of the paper (as the notes transcribe it), keyed by preset name.
 PRESETS: dict[str, Fabric] = {
     "linen": Fabric("linen", warp=_LINEN, weft=_LINEN),
     "silk_crepe": Fabric(
@@ -388,24 +391,8 @@ def _validate_name(kind: str, name: object, valid: tuple[str, ...]) -> str:
 # ---------------------------------------------------------------------------------------
 
 
-def fresnel_dielectric(cos_theta, eta: float) -> np.ndarray:
-    """Exact unpolarised Fresnel reflectance from air into a dielectric of index ``eta`` > 1.
-
-    .. math:: F_r = \\tfrac12 (r_s^2 + r_p^2)
-
-    >>> float(fresnel_dielectric(1.0, 1.5).round(6))
-    0.04
-    """
-    cos_i = np.clip(np.asarray(cos_theta, float), 0.0, 1.0)
-    sin_t2 = (1.0 - cos_i * cos_i) / (eta * eta)
-    cos_t = np.sqrt(np.maximum(1.0 - sin_t2, 0.0))
-    r_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    r_p = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-    return 0.5 * (r_s * r_s + r_p * r_p)
-
-
 def _gaussian(gamma: float, x):
-    """Unit-area normal density with standard deviation ``gamma`` (notes §3)."""
+    """Unit-area normal density with standard deviation ``gamma``."""
     return np.exp(-x * x / (2.0 * gamma * gamma)) / (math.sqrt(2.0 * math.pi) * gamma)
 
 
@@ -440,7 +427,7 @@ def _polar(x, y):
 # ---------------------------------------------------------------------------------------
 
 
-class Sadeghi2013:
+class Sadeghi2013(ReferenceBRDF):
     """Microcylinder cloth BRDF (Sadeghi et al. 2013), callable as ``f(wi, wr)``.
 
     .. math::
@@ -448,7 +435,7 @@ class Sadeghi2013:
         \\sum_{j=1}^{2}\\frac{a_j}{N_j}\\sum_{k=1}^{N_j}
         f_s(t_{jk})\\,M(t_{jk})\\,P(t_{jk})\\cos\\theta_{i,jk}
 
-    This is the BRDF form of the shading model, Eqs. 5–6 and 14–15 (notes §4.5). The
+    This is the BRDF form of the shading model, Eqs. 5–6 and 14–15. The
     thread function f_s is Eqs. 2–4, M is Eqs. 7–9, P is Eqs. 11–13, and Q is Eq. 15.
 
     Parameters
@@ -479,6 +466,7 @@ class Sadeghi2013:
     """
 
     channels = ("R", "G", "B")
+    error = Sadeghi2013Error
 
     def __init__(
         self,
@@ -550,7 +538,7 @@ class Sadeghi2013:
     def _family_axes(w, family_index: int):
         """Return (ω·d_j, ω·b, ω·z) for family j (d_1 = x with b = −y; d_2 = y with b = +x).
 
-        With t = cos α d_j + sin α z and n_t = −sin α d_j + cos α z (notes §2), the frame's
+        With t = cos α d_j + sin α z and n_t = −sin α d_j + cos α z, the frame's
         third axis is b = t × n_t, which is −y for the warp and +x for the weft.
         """
         if family_index == 0:
@@ -638,7 +626,7 @@ class Sadeghi2013:
         """Per-tangent kernel ``K = f_s·M·P`` (Eqs. 4, 9, 13), shape ``(S, ..., 3)``.
 
         Samples are the warp ones, then the weft ones; ``S`` is their total. K is exactly
-        symmetric under ``wi ↔ wr`` (notes §8 A). The full f_r is not, because of Q and
+        symmetric under ``wi ↔ wr``. The full f_r is not, because of Q and
         the projection factor.
         """
         wi, wr = self._directions(wi, wr)
@@ -670,21 +658,9 @@ class Sadeghi2013:
                 q = q + weight * np.maximum(np.cos(np.arctan2(t_r, n_r)), 0.0)
         return q
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        """Evaluate f_r for directions ``wi`` (to the light) and ``wr`` (to the viewer).
-
-        Parameters
-        ----------
-        wi, wr : array_like, shape (..., 3)
-            Unit vectors in the fabric frame; leading axes broadcast.
-
-        Returns
-        -------
-        ndarray, shape (..., 3)
-            f_r in 1/sr per RGB channel. Zero when either direction is at or below the
-            horizon (z ≤ 0) or Q ≤ 0; NaN where an input component is NaN.
-        """
-        wi, wr = self._directions(wi, wr)
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r in 1/sr per RGB channel, (n, 3), of unit pairs above the horizon; 0 where
+        Q ≤ 0.  The horizon, NaN and broadcasting are :class:`ReferenceBRDF`'s."""
         shape = wi.shape[:-1]
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             surf_i = np.zeros(shape)
@@ -710,10 +686,7 @@ class Sadeghi2013:
                 num_r = surf_r[..., None] + vol_r[0][..., None] * A_warp + vol_r[1][..., None] * A_weft
                 f_rev = num_r / (q_i * wr[..., 2])[..., None]
                 f = 0.5 * (f + np.where((q_i > 0)[..., None], f_rev, 0.0))
-        above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
-        f = np.where(above[..., None], f, 0.0)
-        nan_in = np.isnan(wi).any(axis=-1) | np.isnan(wr).any(axis=-1)
-        return np.where(nan_in[..., None], np.nan, f)
+        return f
 
 
 # ---------------------------------------------------------------------------------------

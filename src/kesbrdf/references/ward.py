@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from kesbrdf.references.base import ReferenceBRDF, default_channels
+
 __all__ = ["AnisotropicWard"]
 
 
-class AnisotropicWard:
+class AnisotropicWard(ReferenceBRDF):
     """Callable anisotropic Ward BRDF; ``rho_d`` and ``rho_s`` may be per channel.
 
     >>> w = AnisotropicWard(0.1, 0.3, rho_d=[0.2, 0.1, 0.05], rho_s=0.04)
@@ -36,7 +38,7 @@ class AnisotropicWard:
         self.rho_d = np.broadcast_to(rho_d, (n,)).copy()
         self.rho_s = np.broadcast_to(rho_s, (n,)).copy()
         if channels is None:
-            channels = ("R", "G", "B") if n == 3 else ("value",) if n == 1 else tuple(f"band_{k}" for k in range(n))
+            channels = default_channels(n, "band_")
         self.channels = tuple(channels)
 
     def params(self) -> dict:
@@ -48,21 +50,10 @@ class AnisotropicWard:
             "rho_s": self.rho_s.tolist(),
         }
 
-    def __call__(self, wi, wr) -> np.ndarray:
-        wi = np.asarray(wi, float)
-        wr = np.asarray(wr, float)
-        wi, wr = np.broadcast_arrays(wi, wr)
-        cos_i = wi[..., 2]
-        cos_r = wr[..., 2]
-        above = (cos_i > 0) & (cos_r > 0)
+    def core(self, wi, wr) -> np.ndarray:
+        """f_r (n, C) of unit pairs above the horizon; edges: :class:`ReferenceBRDF`."""
         h = wi + wr
-        with np.errstate(invalid="ignore", divide="ignore"):
-            hz2 = h[..., 2] ** 2
-            exponent = -((h[..., 0] / self.alpha_x) ** 2 + (h[..., 1] / self.alpha_y) ** 2) / hz2
-            spec = np.exp(exponent) / (
-                4 * np.pi * self.alpha_x * self.alpha_y * np.sqrt(np.where(above, cos_i * cos_r, 1.0))
-            )
-        f = self.rho_d / np.pi + self.rho_s * spec[..., None]
-        f = np.where(above[..., None], f, 0.0)
-        nan = np.isnan(cos_i) | np.isnan(cos_r)
-        return np.where(nan[..., None], np.nan, f)
+        with np.errstate(over="ignore", under="ignore"):
+            exponent = -((h[..., 0] / self.alpha_x) ** 2 + (h[..., 1] / self.alpha_y) ** 2) / (h[..., 2] ** 2)
+            spec = np.exp(exponent) / (4 * np.pi * self.alpha_x * self.alpha_y * np.sqrt(wi[..., 2] * wr[..., 2]))
+        return self.rho_d / np.pi + self.rho_s * spec[..., None]

@@ -5,7 +5,7 @@ yet, and registers the BSDF plugins ``kesbrdf`` (:mod:`kesbrdf.render.bsdf`, kin
 ``kesbrdf_halfdiff`` (:mod:`~kesbrdf.render.halfdiff_bsdf`, kind ``kes-halfdiff``),
 ``kesbrdf_prior`` (:mod:`~kesbrdf.render.prior_bsdf`, kind ``fibre-prior``) and the
 reference BSDFs (:mod:`~kesbrdf.render.reference_bsdf`).  Dr.Jit's
-LLVM backend needs LLVM ≥ 17 (DESIGN §7); when ``DRJIT_LIBLLVM_PATH`` is unset and
+LLVM backend needs LLVM ≥ 17 (docs/architecture.md, "Tools it runs on"); when ``DRJIT_LIBLLVM_PATH`` is unset and
 Debian's ``libllvm19`` is installed, it is pointed at that library.
 
 Modules: :mod:`~kesbrdf.render.bsdf` (the plugin), :mod:`~kesbrdf.render.sampling`

@@ -110,10 +110,10 @@ class _FrameUpdater:
 
     def __call__(self, index: int) -> None:
         mi, d = self.mi, self.drape
-        m = self.read_ply(d.frames[index])
-        self.params["cloth.vertex_positions"] = mi.Float(_to_render_world(m.vertices, d.up_axis).ravel())
-        if m.normals is not None and "cloth.vertex_normals" in self.params:
-            self.params["cloth.vertex_normals"] = mi.Float(_to_render_world(m.normals, d.up_axis).ravel())
+        vertices, normals, _, _ = d.cloth_mesh(index)  # a sewn garment: welded and subdivided
+        self.params["cloth.vertex_positions"] = mi.Float(_to_render_world(vertices, d.up_axis).ravel())
+        if normals is not None and "cloth.vertex_normals" in self.params:
+            self.params["cloth.vertex_normals"] = mi.Float(_to_render_world(normals, d.up_axis).ravel())
         turn = d.body_rotation_deg[index] if d.body_rotation_deg and index < len(d.body_rotation_deg) else 0.0
         for k, c in self.colliders.items():
             self.params[f"collider_{k}.vertex_positions"] = mi.Float(_to_render_world(c.vertices, d.up_axis, turn).ravel())
@@ -124,7 +124,8 @@ class _FrameUpdater:
 
 def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions", scene: str | None = None,
                      fps: float | None = None, frames_dir=None, progress=None, first_frame: int = 0,
-                     gif=None, gif_width: int | None = None, upscale_to: tuple[int, int] | None = None) -> Path:
+                     gif=None, gif_width: int | None = None, upscale_to: tuple[int, int] | None = None,
+                     frame_indices=None) -> Path:
     """Render every frame of a drape folder and encode them to ``output``.
 
     Parameters
@@ -146,6 +147,9 @@ def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions
         Called after each frame.
     first_frame : int
         Start the clip at this drape frame (skip the settling at the start).
+    frame_indices : sequence of int, optional
+        Render exactly these drape frames, in this order (a preview of a few frames);
+        overrides ``first_frame``.
     gif : path, optional
         Also encode the same frames as this GIF (``gif_width``: downscaled to that width).
     upscale_to : (W, H), optional
@@ -173,12 +177,17 @@ def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions
     validate_choice("animation scene", scene, ("drape", "dressform", "garment"))
     if not isinstance(first_frame, int) or not 0 <= first_frame < len(drape.frames):
         raise KesbrdfError(f"animation: expected first_frame in [0, {len(drape.frames) - 1}], got {first_frame!r}")
+    if frame_indices is None:
+        frame_indices = range(first_frame, len(drape.frames))
+    frame_indices = [int(i) for i in frame_indices]
+    if not frame_indices or not all(0 <= i < len(drape.frames) for i in frame_indices):
+        raise KesbrdfError(f"animation: expected frame indices in [0, {len(drape.frames) - 1}], got {frame_indices!r}")
     fps = float(fps or drape.fps)
     frames_dir = Path(frames_dir) if frames_dir else output.with_name(output.stem + "_frames")
     frames_dir.mkdir(parents=True, exist_ok=True)
 
     meta = _scenes.provenance(model_path, scene, opts, drape)
-    meta["drape_frames"] = [p.name for p in drape.frames[first_frame:]]
+    meta["drape_frames"] = [drape.frames[i].name for i in frame_indices]
     meta["upscale_to"] = list(upscale_to) if upscale_to else None
     meta["drape_json_sha256"] = _sha256(drape.root / "drape.json")
     meta_path = frames_dir / "render.json"
@@ -195,10 +204,9 @@ def render_animation(model_path, drape_dir, output, opts: "_scenes.RenderOptions
 
     framing = _scenes.garment_framing() if scene == "garment" else _scenes.scene_framing(drape)
     paths = []
-    total = len(drape.frames) - first_frame
+    total = len(frame_indices)
     sc = update = None
-    for n in range(total):
-        i = first_frame + n
+    for n, i in enumerate(frame_indices):
         path = frames_dir / _frame_name(n)
         skipped = path.is_file()
         if not skipped:

@@ -9,17 +9,17 @@ Dr.Jit (single precision), so it agrees with :func:`kesbrdf.models.brdf.evaluate
 
 with w the model's foreshortening weight (:func:`foreshortening`, the Dr.Jit twin of
 :func:`kesbrdf.models.mappings.foreshortening`: √(cos θ_i cos θ_r), bounded toward grazing
-angles for models with ``normalisation="bounded"``), (φ, γ) from the ``deviation`` or ``halfvector`` mapping (DESIGN §4), q read by
+angles for models with ``normalisation="bounded"``), (φ, γ) from the ``deviation`` or ``halfvector`` mapping (docs/method.md, "From the table to a BRDF"), q read by
 bilinear lookup (φ periodic, γ clamped to the measured range; a ``mi.Texture2f``
 whose first φ row is repeated after the last, so clamping equals periodic
 wrapping), c the body term and t the lobe tint.
 
-Frames (DESIGN §7).  Mitsuba's local shading frame is (s, t, n) with s the
+Frames (docs/architecture.md, "Tools it runs on").  Mitsuba's local shading frame is (s, t, n) with s the
 normalised UV-u tangent ∂p/∂u, so **u runs along the warp (fabric x) and v along the
 weft**.  Mitsuba's ``si.wi`` points to the camera, i.e. it is the model's ω_r, and
 ``wo`` points to the light, the model's ω_i.
 
-Colour (DESIGN §5).  ``base_color`` is the Lambertian albedo of the dyed body:
+Colour (docs/method.md, "Colour").  ``base_color`` is the Lambertian albedo of the dyed body:
 c = base_color/π replaces the measured body term; unset, the measured body is used.
 ``lobe_tint`` multiplies the measured lobe q (default 1: the measured sheen, which
 for a dyed satin stays nearly neutral).  Gloss and anisotropy live in q alone, so
@@ -68,15 +68,12 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, validate_choice, where
-from kesbrdf.models.base import require_kind
 from kesbrdf.models.mappings import BOUNDED_LAMBDA, FADE_DEG  # noqa: F401  (FADE_DEG re-exported)
 from kesbrdf.render import sampling as _sampling
 
-__all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "foreshortening", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model", "PLUGINS"]
+__all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "foreshortening", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
 
 MAPPINGS = ("deviation", "halfvector")
-#: Model kinds the plugin evaluates (the ``kes`` table).
-SUPPORTED_KINDS = ("kes",)
 SAMPLINGS = ("lobe", "cosine")
 EXTRAPOLATIONS = ("hold", "fade")
 #: Projected length below which the azimuth falls back to the plane of incidence
@@ -105,8 +102,9 @@ def parse_rgb(value, name: str = "colour") -> np.ndarray:
 
 
 def model_rgb(model, source=None):
-    """(table (n_phi, n_gamma, 3), body (3,)) of a model as RGB."""
-    require_kind(model, SUPPORTED_KINDS, "the renderer", source)
+    """(table (n_phi, n_gamma, 3), body (3,)) of a model's (φ, γ) table as RGB
+    (``model.table_view()``: the ``kes`` table, or any kind's tabulated view)."""
+    model = model.table_view()
     c = model.table.shape[-1]
     if c == 1:
         return np.repeat(model.table, 3, axis=-1), np.repeat(model.body, 3)
@@ -118,19 +116,15 @@ def model_rgb(model, source=None):
     )
 
 
-#: The Mitsuba plugin drawing each renderable model kind.
-PLUGINS = {"kes": "kesbrdf", "kes-halfdiff": "kesbrdf_halfdiff", "fibre-prior": "kesbrdf_prior"}
-
-
 def check_model(path, mapping: str = "deviation"):
     """Load and check a model for the renderer before Mitsuba sees it.
 
     Errors raised inside a plugin constructor reach Python as Mitsuba's RuntimeError
-    with a traceback; checking first gives the CLI a one-line ModelError.  Every kind of
-    :data:`PLUGINS` is accepted (``model.kind`` says which plugin draws it); ``mapping``
-    applies to the ``kes`` kind only.
+    with a traceback; checking first gives the CLI a one-line ModelError.  Every kind is
+    accepted: ``model.render_plugin()`` says which plugin draws it and whether it takes
+    ``mapping`` (the KES mapping of the ``kesbrdf`` table plugin).
     """
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     path = Path(path)
     if not path.is_file():
@@ -138,12 +132,11 @@ def check_model(path, mapping: str = "deviation"):
     if mapping not in MAPPINGS:
         raise ModelError(f"unknown mapping {mapping!r}; the renderer supports {', '.join(MAPPINGS)}")
     model = load(path)
-    kind = getattr(model, "kind", "kes")
-    require_kind(model, tuple(PLUGINS), "the renderer", path)
-    if kind == "kes":
-        model_rgb(model, path)
-    elif model.n_channels not in (1, 3):
+    if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}the renderer needs a model with 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
+    plugin, _ = model.render_plugin(mapping=None if mapping == "deviation" else mapping)
+    if plugin == "kesbrdf":  # the table plugin: the (φ, γ) view must exist before Mitsuba asks
+        model_rgb(model, path)
     return model
 
 
@@ -299,7 +292,7 @@ class KesBSDF(FabricBSDF):
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
-        from kesbrdf.models.kes import load
+        from kesbrdf.io.model_file import load_model as load
 
         filename = _prop(props, "filename")
         if filename is None:
@@ -308,7 +301,7 @@ class KesBSDF(FabricBSDF):
         if not path.is_absolute() and not path.exists():
             # relative to the scene file, as Mitsuba resolves its own filenames (mi.load_file)
             path = Path(str(mi.file_resolver().resolve(str(filename))))
-        model = load(path)
+        model = load(path).table_view()  # any kind: its (φ, γ) table or its tabulated view
         self.filename = str(path)
         mapping = str(_prop(props, "mapping", "deviation"))
         if mapping == "paper":

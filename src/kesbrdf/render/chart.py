@@ -1,5 +1,5 @@
 """The reference chart: the measured fabric, a white fabric and an 18 % grey card in one
-studio shot, at the exposure metered on the card (:func:`kesbrdf.render.studio.meter_exposure`).
+studio shot, at the exposure metered on the card (:func:`kesbrdf.render.exposure.meter_exposure`).
 
 Two spheres of the same model side by side, the left with the measured body (the
 demo's black satin), the right dyed white (:data:`WHITE_BODY`, same measured lobe),
@@ -60,13 +60,10 @@ def load_chart(model_path, opts, subject: bool = True, meter=None):
 
 def meter_chart(model_path, opts) -> float:
     """Exposure (stops) of the chart, metered on its grey card without the spheres."""
-    from kesbrdf.render import scenes as _s
-    from kesbrdf.render import studio
-    from kesbrdf.render.post import exposure_for
+    from kesbrdf.render import exposure as _ex
 
-    o = replace(opts, grey_card=True, denoise=False, spp=studio.METER_SPP, seed=0)
-    img = _s.render_scene(load_chart(model_path, o, subject=False, meter=(studio.METER_SIZE, studio.METER_SPP)), o)
-    return exposure_for(float((np.asarray(img, float)[..., :3] @ studio._REC709).mean()), curve=opts.tonemap)
+    o = _ex.meter_options(opts)
+    return _ex.meter_reading(load_chart(model_path, o, subject=False, meter=(_ex.METER_SIZE, _ex.METER_SPP)), o)
 
 
 def render_chart(model_path, output, opts, exposure: float | None = None) -> tuple[Path, np.ndarray]:

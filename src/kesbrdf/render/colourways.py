@@ -1,4 +1,4 @@
-"""A contact sheet of one garment in several colourways (docs/rendering.md, "Colour model").
+"""A contact sheet of one garment in several colourways (docs/method.md, "Colour").
 
 Every tile uses the same model, scene, light, camera and exposure (``opts.exposure``,
 the scene's metered exposure in the demo: never one per tile); only ``base_color`` (the
@@ -152,7 +152,7 @@ def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation")
     import drjit as dr
     import mitsuba as mi
 
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
     from kesbrdf.render.bsdf import model_rgb
 
     _, measured = model_rgb(load(model_path), model_path)

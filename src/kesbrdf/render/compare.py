@@ -13,7 +13,7 @@ Chain (one call, :func:`compare_render`):
      fitted with :func:`kesbrdf.models.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
      rendered by the ``kesbrdf_halfdiff`` plugin (:mod:`kesbrdf.render.halfdiff_bsdf`).
 
-   Both fits use ``fallback="log"`` (DESIGN §3) and ``body="auto"``.  With
+   Both fits use ``fallback="log"`` (docs/method.md, "Interpolation over orientation") and ``body="auto"``.  With
    ``models=("kes", "fibre-prior")`` the same measurement is also fitted with the fibre
    prior times its residual (:meth:`kesbrdf.models.fibre_prior.FibrePriorModel.fit_measurement`,
    kind ``fibre-prior``: a KES residual table on the paper protocol, a half/difference
@@ -65,6 +65,7 @@ __all__ = [
     "DEFAULT_REFERENCES",
     "default_options",
     "fit_reference_model",
+    "fit_spec",
     "model_bsdf_dict",
     "cloth_mask",
     "flip_mean",
@@ -102,23 +103,18 @@ PANEL_RESOLUTION = (480, 360)
 PANEL_SPP = 64
 
 
-def _can_denoise() -> bool:
-    import importlib.util
-
-    return importlib.util.find_spec("pyoidn") is not None
-
-
 def default_options(**kw) -> "_scenes.RenderOptions":
     """Render options of a comparison: :data:`PANEL_RESOLUTION`, :data:`PANEL_SPP`,
     OIDN when installed, area light, no environment."""
     base = {"spp": PANEL_SPP, "resolution": PANEL_RESOLUTION, "env": "none", "light": "area",
-            "denoise": _can_denoise()}
+            "denoise": _scenes.can_denoise()}
     base.update(kw)
     return _scenes.RenderOptions(**base)
 
 
 def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measurement=None):
-    """Measure ``ref`` virtually and fit ``model`` (one of :data:`MODELS`) for that protocol.
+    """Measure ``ref`` virtually and fit ``model`` (one of :data:`MODELS`) for that protocol
+    with the pipeline's fit step (:func:`kesbrdf.pipeline.fit`, spec :func:`fit_spec`).
 
     ``measurement`` reuses a measurement of ``ref`` with that protocol.  Returns
     (fitted model, n_samples).
@@ -129,24 +125,27 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
     if model not in MODELS:
         raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
+    from kesbrdf.pipeline import fit
+
     m = measurement if measurement is not None else measure(ref, protocol=protocol)
+    return fit(m, fit_spec(protocol, model)).model, len(m)
+
+
+def fit_spec(protocol: str, model: str = "kes"):
+    """The pipeline's fit spec (:class:`kesbrdf.pipeline.FitSpec`) of a comparison model:
+    the protocol's KES kind with the log fallback, or the fibre prior with
+    (``fibre-prior``) or without (``prior-only``) its residual."""
+    from kesbrdf.pipeline import FitSpec
+
     if model in ("fibre-prior", "prior-only"):
-        from kesbrdf.models.fibre_prior import FibrePriorModel
-
-        return FibrePriorModel.fit_measurement(m, residual=model == "fibre-prior"), len(m)
-    if protocol == "paper":
-        from kesbrdf.models.kes import fit
-
-        return fit(m, fallback="log"), len(m)
-    from kesbrdf.models.halfdiff import fit_halfdiff
-
-    return fit_halfdiff(m, fallback="log"), len(m)
+        return FitSpec("fibre-prior", {"residual": model == "fibre-prior"})
+    return FitSpec("kes" if protocol == "paper" else "kes-halfdiff", {"fallback": "log"})
 
 
-def model_bsdf_dict(model_path, kind: str, opts: "_scenes.RenderOptions") -> dict:
-    """The plugin entry rendering a saved model of kind ``kes``, ``kes-halfdiff`` or
-    ``fibre-prior`` (:func:`kesbrdf.render.scenes.bsdf_dict`)."""
-    return _scenes.bsdf_dict(model_path, opts, kind)
+def model_bsdf_dict(model_path, model, opts: "_scenes.RenderOptions") -> dict:
+    """The plugin entry rendering ``model`` saved at ``model_path``, any kind
+    (:func:`kesbrdf.render.scenes.bsdf_dict`)."""
+    return _scenes.bsdf_dict(model_path, opts, model)
 
 
 def cloth_mask(scene: "mi.Scene", shape_id: str = "cloth") -> np.ndarray:
@@ -262,10 +261,9 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         mask = cloth_mask(ref_scene)
         img_ref = _scenes.render_scene(ref_scene, opts)
         for mo, model in fitted.items():
-            kind = getattr(model, "kind", "kes")
             model_path = Path(tmp) / f"{mo}.kes.json"
             model.save(model_path)
-            mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, kind, o2))
+            mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, model, o2))
             images[mo] = _scenes.render_scene(mod_scene, o2)
         img_ref2 = None
         if noise_floor:
@@ -277,11 +275,11 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         "reference": reference,
         "protocol": protocol,
         "scene": scene,
-        "model_kind": getattr(fitted[models[0]], "kind", "kes"),
+        "model_kind": fitted[models[0]].kind,
         "samples": n_samples,
         "flip": first["flip"],
         "rel_rmse": first["rel_rmse"],
-        "models": {mo: {"kind": getattr(fitted[mo], "kind", "kes"), "flip": r["flip"], "rel_rmse": r["rel_rmse"]}
+        "models": {mo: {"kind": fitted[mo].kind, "flip": r["flip"], "rel_rmse": r["rel_rmse"]}
                    for mo, r in results.items()},
         "exposure": exposure,
         "cloth_pixels": int(mask.sum()),

@@ -4,17 +4,16 @@ clip, colourways.
 Stills are 1280×720 in the studio (:mod:`kesbrdf.render.studio`), tone-mapped with the
 ACES curve and denoised with OIDN (:mod:`kesbrdf.render.post`); the clip of the turning
 mannequin is 720p at a low spp, denoised, so that the demo stays within its time budget.
-Exposure: metered once per scene on an 18 % grey card (:func:`studio.meter_exposure`),
+Exposure: metered once per scene on an 18 % grey card (:func:`kesbrdf.render.exposure.meter_exposure`),
 never on the image; the garment's exposure serves its still, the clip and the colourway
 sheet (docs/rendering.md, "Studio").
 """
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import json
 from dataclasses import replace
+from pathlib import Path
 
 from kesbrdf._atomic import write_text
 from kesbrdf.render import animation as _animation
@@ -22,31 +21,27 @@ from kesbrdf.render import chart as _chart
 from kesbrdf.render import colourways as _colourways
 from kesbrdf.render import mesh as _mesh
 from kesbrdf.render import scenes as _scenes
-from kesbrdf.render import studio as _studio_mod
+from kesbrdf.render import exposure as _exposure
 
 __all__ = ["run_demo", "DEMO_COLOUR"]
 
 #: Body colour of the demo stills: None = the measured body.  The embedded fabric is a
 #: black satin; a 0.45 red body (the former value) is as bright as its 0.19 1/sr sheen
 #: and rendered it pink and matte (docs/rendering.md, "Satin findings").  Dyed
-#: versions ("arbitrarily coloured satin", DESIGN §5) are the colourway sheet's job.
+#: versions ("arbitrarily coloured satin", docs/method.md, "Colour") are the colourway sheet's job.
 DEMO_COLOUR = None
 
 
 #: Stills: 1280×720, studio lights + HDR room, ACES, denoised.
 STILL_SPP = 8
-#: The clip: rendered at CLIP_RENDER_SIZE with CLIP_SPP and OIDN, written at 1280×720
-#: (Lanczos); native 720p at full quality is ``kesbrdf render --animation ...
-#: --resolution 1280x720 --spp 64 --denoise`` (docs/rendering.md).  Measured in one run
-#: on the shared 2-core machine: a 640×360 frame at 4 spp + OIDN, upscaled, costs 1.6 s
-#: of CPU; a native 1280×720 frame at the least possible 1 spp costs 2.8–3.0 s (path
-#: tracing 1.2–1.4 s, OIDN at four times the pixels 1.5 s; OIDN's "fast" mode halves
-#: that but leaves speckles along the silhouettes).  For 49 frames that is 60–70 s more,
-#: which takes the demo (160 s) past its 3 minutes, so the demo upscales.
+#: The clip: ``kesbrdf demo`` renders the showcase's preview (render.showcase.PREVIEW:
+#: four frames a quarter of the clip apart at 640×360, 4 spp + OIDN); the full clip,
+#: native 1280×720 at 24 fps, is ``kesbrdf showcase`` (``make showcase``).  The former
+#: demo clip (49 frames at 640×360 upscaled to 720p) took 88 s of the demo's CPU.
 CLIP_SPP = 4
 CLIP_RENDER_SIZE = (640, 360)
-#: First drape frame of the clip (the skirt has settled; the turn starts at 0.6 s).
-CLIP_FIRST_FRAME = 17
+#: First drape frame of the clip: the end of the showcase's settling (0.75 s at 24 fps).
+CLIP_FIRST_FRAME = 18
 #: The colourway sheet: 4 × 2 tiles of 480 × 540 = 1920 × 1080, at COLOURWAY_SPP + OIDN
 #: (4 spp denoised: 8.3 M samples for the sheet, against 6.1 M for the former 800 × 480
 #: sheet at 16 spp without denoising).
@@ -56,15 +51,9 @@ COLOURWAY_SPP = 4
 CHART_SPP = 8
 
 
-def _can_denoise() -> bool:
-    import importlib.util
-
-    return importlib.util.find_spec("pyoidn") is not None
-
 
 def _studio(spp: int, resolution=(1280, 720), **kw):
-    return _scenes.RenderOptions(spp=spp, resolution=resolution, base_color=DEMO_COLOUR, env="studio-hdr",
-                                 light="studio", tonemap="aces", denoise=_can_denoise(), **kw)
+    return _scenes.studio_options(spp, resolution, base_color=DEMO_COLOUR, **kw)
 
 
 def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=None,
@@ -75,7 +64,8 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
     procedural drape sequence stands in.  ``garment_dir`` is a ``kesbrdf drape --scene
     garment`` folder (the sewn skirt on the turning mannequin): its last frame is the
     garment still and the colourways, and frames from ``clip_first_frame`` on are the
-    clip (``garment.mp4`` at 1280×720 and ``garment.gif`` at 640×360).  Without it the
+    clip preview (``garment_preview.mp4``/``.gif``/``_strip.png``: four frames at 640×360;
+    ``garment_dir`` must hold the drape of :data:`kesbrdf.render.showcase.PREVIEW`).  Without it the
     older primitive dress form and a procedural skirt stand in, and the sphere drape is
     animated instead.  ``progress`` is called with one line of text per step.
     """
@@ -87,7 +77,7 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
     exposures = {}
 
     def metered(scene, drape=None, frame=None):
-        e = _studio_mod.meter_exposure(model_path, scene, still, drape=drape, frame=frame)
+        e = _exposure.meter_exposure(model_path, scene, still, drape=drape, frame=frame)
         exposures[scene] = round(e, 4)
         return replace(still, exposure=e)
 
@@ -117,15 +107,17 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
             say(f"  frame {done}/{total}{' (kept)' if skipped else ''}")
 
     if garment_scene == "garment":
-        clip = _studio(clip_spp, resolution=CLIP_RENDER_SIZE, max_depth=3, exposure=garment_still.exposure)
-        first = min(clip_first_frame, len(garment.frames) - 1)
-        say(f"render: clip of {len(garment.frames) - first} frames ({CLIP_RENDER_SIZE[0]}x{CLIP_RENDER_SIZE[1]}, "
-            f"{clip_spp} spp + OIDN, upscaled to 1280x720: native 720p is ~1.8x the CPU a frame, "
-            "past the demo's 3 min; docs/rendering.md)")
-        written["animation"] = _animation.render_animation(
-            model_path, garment.root, out / "garment.mp4", clip, progress=frames, first_frame=first,
-            gif=out / "garment.gif", gif_width=640, upscale_to=(1280, 720))
-        written["gif"] = out / "garment.gif"
+        from kesbrdf.render import showcase as _showcase
+
+        spec = replace(_showcase.PREVIEW, spp=clip_spp)
+        say(f"render: clip preview, {spec.frames} frames spread over the clip ({spec.size[0]}x{spec.size[1]}, "
+            f"{spec.spp} spp + OIDN); the full 1280x720 clip: kesbrdf showcase (make showcase)")
+        clip = _studio(spec.spp, resolution=tuple(spec.size), max_depth=3, exposure=garment_still.exposure)
+        res = _showcase.run_showcase(model_path, out, spec, name="garment_preview", drape_dir=garment.root,
+                                     render_progress=frames, opts=clip)
+        written["animation"] = res["video"]
+        written["gif"] = res["gif"]
+        written["strip"] = res["strip"]
     else:
         anim = _scenes.RenderOptions(spp=16, resolution=(240, 180), base_color=DEMO_COLOUR, env="studio", light="area")
         say(f"render: animation of {len(drape.frames)} frames")

@@ -49,11 +49,13 @@ def _prop(props, name, default=None):
 
 def check_halfdiff_model(path):
     """Load a model file and check that it is a ``kes-halfdiff`` model with 1 or 3 channels."""
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     model = load(Path(path))
-    if getattr(model, "kind", "kes") != "kes-halfdiff":
-        raise ModelError(f"{where(path)}the kesbrdf_halfdiff BSDF reads models of kind 'kes-halfdiff', got {model.kind!r}")
+    plugin, _ = model.render_plugin()
+    if plugin != "kesbrdf_halfdiff":
+        raise ModelError(f"{where(path)}the kesbrdf_halfdiff BSDF reads models of kind 'kes-halfdiff', got "
+                         f"{model.kind!r} (drawn by the {plugin!r} plugin)")
     if model.table.shape[-1] not in (1, 3):
         raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.table.shape[-1]}")
     return model

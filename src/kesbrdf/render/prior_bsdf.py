@@ -55,6 +55,7 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
+from kesbrdf.optics import fresnel_dielectric
 from kesbrdf.render.bsdf import EXTRAPOLATIONS, SAMPLINGS, FabricBSDF, KesTable, parse_rgb, phi_gamma
 from kesbrdf.render.halfdiff_bsdf import HalfDiffTable, half_diff
 
@@ -83,11 +84,13 @@ def _rgb(a):
 
 def check_prior_model(path):
     """Load a model file and check that it is a ``fibre-prior`` model with 1 or 3 channels."""
-    from kesbrdf.models.kes import load
+    from kesbrdf.io.model_file import load_model as load
 
     model = load(Path(path))
-    if getattr(model, "kind", "kes") != "fibre-prior":
-        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r}")
+    plugin, _ = model.render_plugin()
+    if plugin != PLUGIN:
+        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r} "
+                         f"(drawn by the {plugin!r} plugin)")
     if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
     return model
@@ -148,14 +151,6 @@ def _cos_phi(wi, wr, t):
     return dr.clip(dr.select(den > 1e-30, _dot(pi, pr) / dr.maximum(den, 1e-30), 1.0), -1.0, 1.0)
 
 
-def _fresnel(c, eta: float):
-    c = dr.clip(dr.abs(c), 0.0, 1.0)
-    g = dr.sqrt(dr.maximum(eta * eta - 1.0 + c * c, 0.0))
-    a = (g - c) / (g + c)
-    b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0)
-    return 0.5 * a * a * (1.0 + b * b)
-
-
 def _frame(w, alpha: float):
     """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.models.fibre_physics's family frame."""
     s, c = math.sin(alpha), math.cos(alpha)
@@ -175,7 +170,7 @@ class _Prior:
         self.kd = _rgb(np.exp([p[f"log_kd_{c}"] for c in range(C)]))
         self.offset = p["axis_offset"] if spec.free_axes else 0.0
         self.d = (p["d1"], p["d2"]) if spec.free_theta_d else None
-        self.f45 = float(P.fresnel_dielectric(math.cos(math.pi / 4)))
+        self.f45 = float(fresnel_dielectric(math.cos(math.pi / 4), P.THETA_D_ETA))
         self.families = []
         for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, math.pi / 2)):
             lo, hi, log_s, c2, rho = (p[f"{fam}_{k}"] for k in ("u_lo", "u_hi", "log_s", "c2", "rho"))
@@ -235,7 +230,7 @@ class _Prior:
         s = wi + wr
         norm_sum = dr.norm(s)
         h = s / dr.maximum(norm_sum, 1e-30)
-        phi_td = _fresnel(dr.dot(wi, h), self.P.THETA_D_ETA) * (1.0 / self.f45)
+        phi_td = fresnel_dielectric(dr.dot(wi, h), self.P.THETA_D_ETA, dr) * (1.0 / self.f45)
         if self.d is not None:
             x = dr.dot(wi, wr)
             phi_td = phi_td * dr.exp(dr.clip(self.d[0] * x + self.d[1] * x * x, -50.0, 50.0))

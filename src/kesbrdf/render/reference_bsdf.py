@@ -54,6 +54,7 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.optics import fresnel_dielectric, schlick_weight
 from kesbrdf.references.registry import REFERENCES, RGL_FILES, make_reference, rgl_path
 from kesbrdf.render import sampling as _sampling
 from kesbrdf.render.bsdf import FabricBSDF
@@ -116,21 +117,11 @@ def _ashikhmin_shirley(ref):
         expo = dr.select(s2 > 0.0, (n_u * hu2 + n_v * hv2) / dr.select(s2 > 0.0, s2, 1.0), n_u)
         lobe = dr.exp(expo * dr.log(dr.maximum(h.z, 1e-30)))
         spec = c_spec * lobe / (k_h * dr.maximum(wi.z, wr.z))
-        schlick = dr.power(1.0 - k_h, 5.0)
-        fresnel = R_s + (1.0 - R_s) * schlick
+        fresnel = R_s + (1.0 - R_s) * schlick_weight(k_h, dr)
         shape = (1.0 - dr.power(1.0 - 0.5 * wi.z, 5.0)) * (1.0 - dr.power(1.0 - 0.5 * wr.z, 5.0))
         return spec * fresnel + c_diff * R_d * (1.0 - R_s) * shape
 
     return f
-
-
-def _fresnel_dielectric(cos_i, eta):
-    cos_i = dr.clip(cos_i, 0.0, 1.0)
-    sin_t2 = (1.0 - cos_i * cos_i) * (1.0 / (eta * eta))
-    cos_t = dr.sqrt(dr.maximum(1.0 - sin_t2, 0.0))
-    r_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t)
-    r_p = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
-    return 0.5 * (r_s * r_s + r_p * r_p)
 
 
 def _gaussian(g, x):
@@ -205,7 +196,7 @@ def _sadeghi(ref):
                 cos_phi_d = dr.clip(cos_phi_i * cos_phi_r + sin_phi_i * sin_phi_r, -1.0, 1.0)
                 phi_d = dr.acos(cos_phi_d)
                 cos_half_phi_d = dr.sqrt(0.5 * (1.0 + cos_phi_d))
-                F_r = _fresnel_dielectric(cos_theta_d * cos_half_phi_d, eta)
+                F_r = fresnel_dielectric(cos_theta_d * cos_half_phi_d, eta, dr)
                 surf = F_r * cos_half_phi_d * _gaussian(family.gamma_s, theta_h)
                 F_t = 1.0 - F_r
                 vol = (

@@ -41,7 +41,7 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import FormatError, KesbrdfError, validate_choice, where
-from kesbrdf.io.ply import write_ply
+from kesbrdf.io.ply import read_ply, write_ply
 from kesbrdf.render import mesh as _mesh
 
 __all__ = [
@@ -70,6 +70,10 @@ STUDIO_FLOOR_ALBEDO = (0.04, 0.04, 0.042)
 MANNEQUIN_ALBEDO = (0.62, 0.58, 0.52)
 #: Diffuse albedo of floors and dress forms.
 PROP_ALBEDO = (0.42, 0.42, 0.42)
+#: Loop subdivision levels of a sewn garment's render mesh (:mod:`kesbrdf.cloth.render_mesh`):
+#: one level turns the 1–2 cm simulation cells of the showcase garment into 5–10 mm
+#: triangles, 3–6 px at 720p in the garment shot (1.8 mm a pixel), with smooth normals.
+GARMENT_SUBDIVISION_LEVELS = 1
 #: Vertical field of view of the camera, degrees.
 FOV_DEG = 32.0
 
@@ -99,7 +103,7 @@ class RenderOptions:
     tonemap: str = "clip"
     denoise: bool = False
     #: an 18 % grey card in the frame's lower left, facing the camera
-    #: (:func:`grey_card_box`; the exposure reference of :mod:`kesbrdf.render.studio`)
+    #: (:func:`grey_card_box`; the exposure reference of :mod:`kesbrdf.render.exposure`)
     grey_card: bool = False
     integrator: dict | None = field(default=None, repr=False)
 
@@ -141,6 +145,31 @@ class Drape:
     up_axis: str
     body_rotation_deg: list | None = None
     moving: tuple = ()
+    #: stitched vertex pairs of a sewn garment (drape.json ``cloth.seams``), else None
+    seams: list | None = None
+    _smooth: object = field(default=None, repr=False, compare=False)
+
+    def smooth_mesh(self):
+        """The welded, subdivided render mesh of a sewn garment (:mod:`kesbrdf.cloth.render_mesh`),
+        built once from the first frame's faces and UVs; None for a drape without seams."""
+        if self.seams is None:
+            return None
+        if self._smooth is None:
+            from kesbrdf.cloth.render_mesh import SmoothMesh
+
+            first = read_ply(self.frames[0])
+            self._smooth = SmoothMesh(first.faces, first.uv, np.asarray(self.seams, np.int64),
+                                      levels=GARMENT_SUBDIVISION_LEVELS)
+        return self._smooth
+
+    def cloth_mesh(self, index: int):
+        """``(positions, normals, uv, faces)`` of frame ``index`` as rendered (drape coordinates)."""
+        m = read_ply(self.frames[index])
+        sm = self.smooth_mesh()
+        if sm is None:
+            return m.vertices, m.normals, m.uv, m.faces
+        p, n = sm.apply(m.vertices)
+        return p, n, sm.uv, sm.faces
 
 
 def read_drape(path) -> Drape:
@@ -167,8 +196,10 @@ def read_drape(path) -> Drape:
     validate_choice("up_axis", up, ("y", "z"), meta_path, error=FormatError)
     moving = tuple(k for k, c in enumerate(meta.get("colliders", [])) if isinstance(c, dict) and c.get("moves"))
     rot = meta.get("body_rotation_deg")
+    cloth = meta.get("cloth") if isinstance(meta.get("cloth"), dict) else {}
+    seams = cloth.get("seams") if isinstance(cloth.get("seams"), list) and cloth.get("seams") else None
     return Drape(root, float(meta.get("fps", 24.0)), frames, colliders, str(meta.get("scene", "sphere")), up,
-                 [float(a) for a in rot] if isinstance(rot, list) else None, moving)
+                 [float(a) for a in rot] if isinstance(rot, list) else None, moving, seams)
 
 
 def _centroid(path) -> np.ndarray:
@@ -189,36 +220,27 @@ def _guess_up_axis(first, last) -> str:
 
 
 # -- pieces of scene dicts ----------------------------------------------------------
-def bsdf_dict(model_path, opts: RenderOptions, kind: str | None = None) -> dict:
+def bsdf_dict(model_path, opts: RenderOptions, model=None) -> dict:
     """The BSDF entry for a model file and the colour options.
 
-    The plugin follows the model's kind (:data:`kesbrdf.render.bsdf.PLUGINS`): ``kesbrdf``
-    for ``kes`` (with ``opts.mapping``), ``kesbrdf_halfdiff`` for ``kes-halfdiff``,
-    ``kesbrdf_prior`` for ``fibre-prior``.  ``kind`` saves reading the file again when the
-    caller knows it.
+    The model says which plugin draws it and which options that plugin takes
+    (``model.render_plugin``, :mod:`kesbrdf.models.base`): ``kesbrdf`` (the (φ, γ) table,
+    with ``opts.mapping``) unless the kind has its own.  ``model`` saves reading the file
+    again when the caller has it.
     """
-    from kesbrdf.render.bsdf import PLUGINS
+    if model is None or isinstance(model, str):
+        from kesbrdf.io.model_file import load_model
 
-    if kind is None:
-        from kesbrdf.models.kes import load
-
-        kind = getattr(load(Path(model_path)), "kind", "kes")
-    if kind not in PLUGINS:
-        raise KesbrdfError(f"the renderer draws models of kind {', '.join(map(repr, PLUGINS))}, got {kind!r}")
+        model = load_model(Path(model_path))
+    plugin, props = model.render_plugin(
+        mapping=None if opts.mapping == "deviation" else opts.mapping, extrapolation=opts.extrapolation)
     d = {
-        "type": PLUGINS[kind],
+        "type": plugin,
         "filename": str(model_path),
         "two_sided": bool(opts.two_sided),
         "sampling": opts.sampling,
+        **props,
     }
-    if kind == "kes":
-        d["mapping"] = opts.mapping
-    elif opts.mapping != "deviation":  # never ignore an option silently
-        raise KesbrdfError(f"mapping {opts.mapping!r} applies to kes models only; a {kind} model has its own "
-                           "parametrisation (drop --mapping)")
-    if opts.extrapolation is not None and (kind != "fibre-prior" or opts.extrapolation != "hold"):
-        # the plugins' default is the model's own
-        d["extrapolation"] = opts.extrapolation
     if opts.base_color is not None:
         d["base_color"] = ",".join(f"{float(c):.6g}" for c in opts.base_color)
     if opts.lobe_tint is not None:
@@ -411,7 +433,7 @@ METER_FILL = 0.7
 
 def _meter_camera(opts: RenderOptions, center, radius, direction, size: int, spp: int) -> dict:
     """A camera at the still's viewpoint aimed at the grey card, the card filling its
-    ``size`` × ``size`` frame (the meter of :func:`kesbrdf.render.studio.meter_exposure`)."""
+    ``size`` × ``size`` frame (the meter of :func:`kesbrdf.render.exposure.meter_exposure`)."""
     c, half, origin, up = _grey_card_geometry(opts, center, radius, direction)
     fov = 2 * math.degrees(math.atan(METER_FILL * half / float(np.linalg.norm(c - origin))))
     return {"type": "perspective", "fov": fov,
@@ -451,7 +473,7 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
     subject : bool
         False leaves out the cloth and its props (mannequin, dress form) but keeps the
         framing, floor, backdrop, lights and grey card: the exposure meter's scene
-        (:func:`kesbrdf.render.studio.meter_exposure`).
+        (:func:`kesbrdf.render.exposure.meter_exposure`).
     meter : (size, spp), optional
         Replace the camera by the exposure meter's: aimed at the grey card from the
         still's viewpoint, the card filling a size × size frame (:func:`_meter_camera`).
@@ -461,8 +483,8 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
     if cloth_bsdf is None:
         from kesbrdf.render.bsdf import check_model
 
-        kind = getattr(check_model(model_path, opts.mapping), "kind", "kes")
-    bsdf = cloth_bsdf if cloth_bsdf is not None else bsdf_dict(model_path, opts, kind)
+        cloth_bsdf = bsdf_dict(model_path, opts, check_model(model_path, opts.mapping))
+    bsdf = cloth_bsdf
     if isinstance(drape, (str, Path)):
         drape = read_drape(drape)
     shapes: dict = {}
@@ -489,7 +511,13 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
             index = len(drape.frames) - 1 if frame is None else int(frame)
             if not 0 <= index < len(drape.frames):
                 raise KesbrdfError(f"{where(drape.root)}expected a frame index in [0, {len(drape.frames) - 1}], got {frame}")
-            shapes["cloth"] = _ply_shape(drape.frames[index], bsdf, drape.up_axis)
+            if drape.seams is not None:  # a sewn garment: welded, subdivided, smooth (cloth.render_mesh)
+                path = workdir / "cloth.ply"
+                p, n, uv, f = drape.cloth_mesh(index)
+                write_ply(path, p, f, n, uv)
+                shapes["cloth"] = _ply_shape(path, bsdf, drape.up_axis)
+            else:
+                shapes["cloth"] = _ply_shape(drape.frames[index], bsdf, drape.up_axis)
             turn = drape.body_rotation_deg[index] if drape.body_rotation_deg and index < len(drape.body_rotation_deg) else 0.0
             prop = _diffuse(MANNEQUIN_ALBEDO) if scene == "garment" else _diffuse((0.5, 0.48, 0.45))
             for k, c in enumerate(drape.colliders):
@@ -670,3 +698,17 @@ def render_still(model_path, scene: str, output, opts: RenderOptions, drape=None
     sc = load_scene(model_path, scene, opts, drape=drape, frame=frame)
     img = render_scene(sc, opts)
     return save_image(output, img, provenance(model_path, scene, opts, drape), opts.exposure, opts.tonemap)
+
+
+def can_denoise() -> bool:
+    """True when OIDN (``pyoidn``) is installed, so renders may be denoised."""
+    import importlib.util
+
+    return importlib.util.find_spec("pyoidn") is not None
+
+
+def studio_options(spp: int, resolution=(1280, 720), base_color=None, **kw) -> RenderOptions:
+    """The studio look of the demo and the showcase: lights + HDR room, ACES, OIDN when
+    installed (docs/rendering.md, "Studio"); ``base_color`` None keeps the measured body."""
+    return RenderOptions(spp=spp, resolution=resolution, base_color=base_color, env="studio-hdr",
+                         light="studio", tonemap="aces", denoise=can_denoise(), **kw)

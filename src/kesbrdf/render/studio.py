@@ -25,7 +25,7 @@ strip behind the camera and three bright windows at eye height (:data:`WINDOWS`)
 a glossy lobe mirrors as thin streaks.  Mitsuba's ``sunsky`` emitter (Mitsuba ≥ 3.6)
 can be used instead (``env="sunsky"``).
 
-Exposure (:func:`meter_exposure`): metered once per scene on an 18 % grey card in the
+Exposure (:func:`kesbrdf.render.exposure.meter_exposure`): metered once per scene on an 18 % grey card in the
 scene's light, the subject left out, and shown at 18 % after the ACES curve; every
 image of the scene shares it (docs/rendering.md, "Studio").
 """
@@ -36,16 +36,7 @@ import math
 
 import numpy as np
 
-__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle", "meter_exposure",
-           "card_reading", "METER_SPP", "WINDOWS"]
-
-#: The meter's render: METER_SIZE² pixels of the card at METER_SPP (262 k samples).  Its
-#: mean is repeatable to 0.5 % between seeds (measured on the sphere scene: the card's
-#: light is noisy, the windows and soft boxes being small and bright, ±6 % between seeds
-#: over a 5 × 4-pixel patch at 64 spp).
-METER_SIZE = 32
-METER_SPP = 256
-_REC709 = np.array([0.2126, 0.7152, 0.0722])
+__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle", "WINDOWS"]
 
 #: (name, direction from the subject, distance / r, (width, height) / r, relative radiance)
 STUDIO_LIGHTS = (
@@ -140,47 +131,3 @@ def environment_map(width: int = 512) -> np.ndarray:
     img = img + boxes[..., None] * np.array([1.0, 0.98, 0.95])
     return img.astype(np.float32)
 
-
-def card_reading(img, resolution=None) -> float:
-    """Mean linear luminance (Rec. 709 Y) of the grey card's pixels in a linear render."""
-    from kesbrdf.render.scenes import grey_card_box
-
-    img = np.asarray(img, float)
-    rows, cols = grey_card_box(resolution or (img.shape[1], img.shape[0]))
-    return float((img[rows, cols, :3] @ _REC709).mean())
-
-
-def meter_exposure(model_path, scene: str, opts, drape=None, frame=None) -> float:
-    """The scene's exposure (stops), metered once on an 18 % grey card.
-
-    The photographer's rule: the exposure is set by a reference in the scene's light,
-    never by the subject.  The scene is loaded without its subject (cloth, mannequin,
-    dress form; :func:`kesbrdf.render.scenes.load_scene` with ``subject=False``) and with
-    the grey card at its place in the frame (``grey_card``), seen from the camera by a
-    narrow meter view that the card fills (:data:`METER_SIZE`, :data:`METER_SPP`), and the exposure is the one at which the card's mean luminance is
-    shown at 18 % after the tone curve (:func:`kesbrdf.render.post.exposure_for`).
-    Every image of that scene (stills, colourways, the reference chart) then uses it:
-    a black fabric stays black, a white one bright.
-    """
-    import json
-    from dataclasses import replace
-
-    from kesbrdf.render import scenes as _scenes
-    from kesbrdf.render.post import exposure_for
-
-    o = replace(opts, grey_card=True, denoise=False, spp=METER_SPP, seed=0, base_color=None, lobe_tint=None)
-    # without a drape the metered scene (no subject) does not depend on the model: one
-    # reading per scene and light set serves every fabric of a batch
-    key = None if drape is not None else json.dumps([scene, o.to_json()], sort_keys=True, default=str)
-    if key is not None and key in _METERED:
-        return _METERED[key]
-    sc = _scenes.load_scene(model_path, scene, o, drape=drape, frame=frame, subject=False,
-                            meter=(METER_SIZE, METER_SPP))
-    img = _scenes.render_scene(sc, o)
-    e = exposure_for(float((np.asarray(img, float)[..., :3] @ _REC709).mean()), curve=opts.tonemap)
-    if key is not None:
-        _METERED[key] = e
-    return e
-
-
-_METERED: dict = {}

@@ -76,7 +76,7 @@ def validate(model, m: Measurement, mapping: str | None = None) -> dict:
         recorded = model.parameters.get("mapping")
         mapping = recorded if recorded in model.mappings else model.default_mapping
     mapping = model.check_mapping(mapping)
-    warp = getattr(model, "sample_frame_warp", 0.0)
+    warp = model.sample_frame_warp
     if warp:
         from kesbrdf.models.scattered import to_fabric_frame
 
@@ -113,7 +113,13 @@ def leave_one_orientation_out(m: Measurement, mapping: str = "deviation", **fit_
     φ → π − φ symmetry), and 135° from 0°, 45°, 90°.  Warp and weft are reported as
     not predictable.
     """
-    psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
+    if not m.is_in_plane.any():  # scattered geometries carry no orientation ψ to hold out
+        from kesbrdf.errors import MeasurementError
+
+        raise MeasurementError(
+            f"{m.source or 'measurement'}: leave-one-orientation-out needs in-plane samples at the measured "
+            f"orientations psi; got {len(m)} samples out of the plane of incidence")
+    psi_deg = np.degrees(np.where(m.is_in_plane, np.asarray(m.psi, float), np.nan))
     out = {}
     for held in PAPER_ORIENTATIONS_DEG:
         rows = np.abs(psi_deg - held) < 0.5

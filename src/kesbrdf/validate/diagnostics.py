@@ -1,4 +1,4 @@
-"""Physical diagnostics of a model (DESIGN §4): reciprocity, directional albedo
+"""Physical diagnostics of a model (docs/method.md, "Diagnostics"): reciprocity, directional albedo
 (white-furnace check), and the behaviour at the mirror direction γ → 0.
 """
 
@@ -8,7 +8,7 @@ import numpy as np
 
 from kesbrdf.models.brdf import evaluate
 from kesbrdf.geometry import grazing_albedo, spherical_to_cartesian  # noqa: F401  (grazing_albedo: public here too)
-from kesbrdf.models.kes import gamma0_behaviour
+from kesbrdf.models.table import gamma0_behaviour
 
 __all__ = ["directional_albedo", "grazing_albedo", "GRAZING_ANGLES_DEG", "reciprocity_error", "gamma0_behaviour", "diagnose"]
 

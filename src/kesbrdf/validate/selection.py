@@ -19,7 +19,7 @@ from kesbrdf.models.fibre_physics import fit_prior
 from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio_table
 from kesbrdf.validate.compare import leave_one_orientation_out, mirror_135_to_45
 
-__all__ = ["loo_compare", "choose", "mirror_test", "orientation_interpolation_loo", "MIRROR_Z", "INTERPOLATION"]
+__all__ = ["loo_compare", "choose", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "MIRROR_Z", "INTERPOLATION"]
 
 
 def _nrmse(pred, truth):
@@ -314,3 +314,74 @@ def orientation_interpolation_loo(measurement) -> dict:
         pred = 0.5 * (_on(lo[0], lo[1], line[0]) + _on(hi[0], hi[1], line[0]))
         out[f"{p:g}"] = _nrmse_finite(pred, line[1])
     return out
+
+
+# -- dense in-plane data: the fibre-coordinate kind against interpolation over ψ -------------
+
+def _grid_key(m, rows):
+    """(θ_i, θ_r) in 0.01° of ``rows``, for matching samples across orientations."""
+    return [(int(round(a * 100)), int(round(b * 100)))
+            for a, b in zip(np.degrees(m.theta_i[rows]), np.degrees(m.theta_r[rows]))]
+
+
+def dense_orientation_loo(measurement, **fit_options) -> dict:
+    """Leave-one-orientation-out NRMSE of ``fibre-coord`` and of interpolation over ψ on dense data.
+
+    Each orientation ψ ∈ {0, 45, 90, 135}° is held out in turn.  ``fibre-coord`` (its pure
+    fibre-coordinate model, :func:`kesbrdf.models.fibre_coord.fit_coord`, fitted to the
+    other three) predicts every held-out sample; the KES-free baseline predicts each
+    held-out (θ_i, θ_r) as the mean of the same (θ_i, θ_r) at ψ ± 45° (ψ is 180°-periodic),
+    as :func:`orientation_interpolation_loo` does on one line.  It is the dense analogue
+    of :func:`choose`'s first test: does the fibre physics carry the reflectance from
+    the measured orientations to another one better than interpolating between them?
+
+    Returns ``{"orientations": {psi: {"fibre-coord": nrmse, INTERPOLATION: nrmse}},
+    "median_all": {candidate: median over the four}}``; a candidate that cannot be scored
+    on all four is left out of ``median_all``.
+    """
+    from kesbrdf.models.fibre_coord import fit_coord
+
+    m = measurement
+    psi = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
+    at = {p: np.abs(psi - p) < 0.5 for p in (0.0, 45.0, 90.0, 135.0)}
+    table = {}
+    for p, rows in at.items():
+        if not rows.any():
+            continue
+        train = m.subset(~rows & np.isfinite(psi))
+        test = m.subset(rows)
+        row = {}
+        try:
+            model = fit_coord(train, **fit_options)
+            row["fibre-coord"] = _nrmse(model(test.wi, test.wr), test.values)
+        except Exception:  # noqa: BLE001  (a failed fit is no evidence for the prior)
+            pass
+        lo, hi = at[(p - 45.0) % 180.0], at[(p + 45.0) % 180.0]
+        if lo.any() and hi.any():
+            a, b = (dict(zip(_grid_key(m, nb), m.values[nb])) for nb in (lo, hi))
+            nan = np.full(m.n_channels, np.nan)
+            pred = np.array([0.5 * (a[k] + b[k]) if k in a and k in b else nan for k in _grid_key(m, rows)])
+            row[INTERPOLATION] = _nrmse_finite(pred, test.values)
+        table[f"{p:g}"] = row
+    median = {}
+    for c in ("fibre-coord", INTERPOLATION):
+        vals = [r.get(c, np.nan) for r in table.values()]
+        if len(vals) == 4 and np.all(np.isfinite(vals)):
+            median[c] = float(np.median(vals))
+    return {"orientations": table, "median_all": median}
+
+
+def choose_dense(result: dict, kes_branch: str = "kes-halfdiff") -> tuple[str, str]:
+    """``(kept, why)`` for dense in-plane data from a :func:`dense_orientation_loo` result.
+
+    ``fibre-coord`` when its median held-out-orientation NRMSE over all four orientations
+    is below interpolation over ψ's, else ``kes_branch``.
+    """
+    med = result.get("median_all") or {}
+    if "fibre-coord" not in med or INTERPOLATION not in med:
+        return kes_branch, "fibre-coord could not be scored on all four orientations"
+    if med["fibre-coord"] < med[INTERPOLATION]:
+        return "fibre-coord", (f"fibre-coord predicts a held-out orientation better than interpolation over psi "
+                               f"({med['fibre-coord']:.3f} < {med[INTERPOLATION]:.3f}, median of four)")
+    return kes_branch, (f"fibre-coord does not predict a held-out orientation better than interpolation over psi "
+                        f"({med['fibre-coord']:.3f} >= {med[INTERPOLATION]:.3f}, median of four)")

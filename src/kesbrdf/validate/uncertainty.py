@@ -1,14 +1,15 @@
 """Per-prediction uncertainty of a model file, and its coverage of held-out truths.
 
-Only the ``fibre-prior`` kind carries a σ: its fit has a Laplace covariance, its file
-holds the candidate models whose spread is the model term (the pure prior and the KES
-table fitted to the same samples) and the support of the measured data, from which an
+A model says whether it carries a σ (``model.has_sigma``, the capability of
+:mod:`kesbrdf.models.base`) and computes it (``model.predict_sigma``).  Today the
+``fibre-prior`` kind does: its fit has a Laplace covariance, its file holds the
+candidate models whose spread is the model term (the pure prior and the KES table
+fitted to the same samples) and the support of the measured data, from which an
 off-support term grows (:func:`kesbrdf.models.fibre_prior.predict_with_uncertainty`,
-docs/prior.md §5).  A ``kes`` /
-``kes-halfdiff`` table interpolates the measured samples exactly; the file holds no
-noise estimate and no second candidate, so any σ computed from it alone would be
-invented.  Asking for one is a :class:`~kesbrdf.errors.ModelError` that says so
-(decision recorded in docs/prior.md, "Uncertainty of other kinds").
+docs/prior.md §5).  A ``kes`` / ``kes-halfdiff`` table interpolates the measured samples
+exactly; the file holds no noise estimate and no second candidate, so any σ computed
+from it alone would be invented.  Asking for one is a :class:`~kesbrdf.errors.ModelError`
+that says so (decision recorded in docs/prior.md, "Uncertainty of other kinds").
 """
 
 from __future__ import annotations
@@ -17,34 +18,28 @@ import numpy as np
 
 from kesbrdf.errors import ModelError
 
-__all__ = ["has_uncertainty", "predict_sigma", "coverage", "SIGMA_KINDS"]
-
-#: Model kinds that carry a per-prediction σ.
-SIGMA_KINDS = ("fibre-prior",)
+__all__ = ["has_uncertainty", "predict_sigma", "coverage"]
 
 
 def has_uncertainty(model) -> bool:
-    """True when ``model`` carries a per-prediction σ (see :data:`SIGMA_KINDS`)."""
-    return getattr(model, "kind", None) in SIGMA_KINDS
+    """True when ``model`` carries a per-prediction σ (``model.has_sigma``)."""
+    return bool(getattr(model, "has_sigma", False))
 
 
 def predict_sigma(model, wi, wr, source: str = "model"):
-    r"""f_r and its σ at direction pairs.
+    r"""f_r and its σ at direction pairs (``model.predict_sigma``).
 
-    σ of ln f combines the fit noise propagated through the Laplace covariance, the
-    spread between the candidates (the model, its pure prior and the stored KES table),
-    the θ_d-law term and the off-support term, eq. (U1) of
+    For the ``fibre-prior`` kind, σ of ln f combines the fit noise propagated through the
+    Laplace covariance, the spread between the candidates (the model, its pure prior and
+    the stored KES table), the θ_d-law term and the off-support term, eq. (U1) of
     :func:`kesbrdf.models.fibre_prior.predict_with_uncertainty` (docs/prior.md §5):
 
     .. math:: \sigma_{\ln f}^2 = g^\top\Sigma_\theta g + \tfrac1K\sum_k(\ln f_k-\ln f)^2
               + (w_s\ln\Phi)^2 + (c\,d)^2
 
-    A file written before the KES candidate and the support were stored gives the first
-    three terms with the pure prior as the only candidate (its diagnostics say so).
-
     Parameters
     ----------
-    model : FibrePriorModel
+    model : ReflectanceModel
     wi, wr : array_like (N, 3)
         Unit directions to the light and to the viewer (fabric frame).
     source : str
@@ -58,22 +53,15 @@ def predict_sigma(model, wi, wr, source: str = "model"):
     Raises
     ------
     ModelError
-        When the model's kind carries no σ.
+        When the model carries no σ.
     """
-    if not has_uncertainty(model):
+    result = model.predict_sigma(wi, wr) if has_uncertainty(model) else None
+    if result is None:
         raise ModelError(
-            f"{source}: kind {getattr(model, 'kind', '?')!r} carries no uncertainty; expected one of "
-            f"{', '.join(SIGMA_KINDS)} (fit with --kind fibre-prior; a KES table interpolates the samples "
-            "exactly and the file holds no noise estimate)"
+            f"{source}: a {model.kind!r} model carries no uncertainty (fit with --kind fibre-prior for one; "
+            "a KES table interpolates the samples exactly and the file holds no noise estimate)"
         )
-    from kesbrdf.models.fibre_prior import predict_with_uncertainty
-
-    wi = np.asarray(wi, float).reshape(-1, 3)
-    wr = np.asarray(wr, float).reshape(-1, 3)
-    f, sigma, sigma_log = predict_with_uncertainty(model, wi, wr)
-    f = np.where(np.isfinite(f), f, 0.0)
-    sigma = np.where(np.isfinite(sigma), np.maximum(sigma, 0.0), 0.0)
-    return f, sigma, sigma_log
+    return result
 
 
 def coverage(pred, sigma_log, truth) -> dict:

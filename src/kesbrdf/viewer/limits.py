@@ -2,7 +2,7 @@
 
 One frozen :class:`ViewerLimits` carries every number the server enforces, so the CLI
 flags, the tests and the docs name the same fields.  The defaults were measured on a
-2-core machine (docs/decisions.md, "Viewer server: uvicorn, deadlines and fit budgets").
+2-core machine (docs/decisions.md, "Viewer server").
 """
 
 from __future__ import annotations

@@ -1,18 +1,19 @@
 """Local HTTP server of the web viewer: static bundle plus a small JSON API.
 
 An ASGI application served by uvicorn (HTTP/1.1 through h11; docs/decisions.md, "Viewer
-server: uvicorn, deadlines and fit budgets").  The server binds to 127.0.0.1 by default
+server").  The server binds to 127.0.0.1 by default
 and serves
 
 * the built viewer bundle from ``kesbrdf/viewer/static/`` (``GET /``, ``GET /assets/...``);
 * ``GET /api/config``: ``{"initial": id or null, "max_upload_bytes": n, "version": ...}``;
 * ``GET /api/models``: ``{"models": [{"id", "name", "kind", "has_measurement"}]}``;
-* ``GET /api/model/<id>``: ``{"id", "name", "model": <the model file JSON, docs/formats.md>,
+* ``GET /api/model/<id>``: ``{"id", "name", "model": <the model file JSON, docs/formats.md;
+  for a kind without a (φ, γ) table its tabulated view>,
   "measurement": <see :func:`measurement_to_json`> or null}``;
 * ``POST /api/fit?name=<file name>[&fallback=error|log]`` with the raw CSV bytes as body:
   reads it with :func:`kesbrdf.io.measurement_csv.read_measurement`, fits it with
   :func:`kesbrdf.fit` with its defaults (kind chosen from the data, as ``kesbrdf fit``
-  with ``--no-compare``: the viewer draws the KES kinds, not ``fibre-prior``;
+  with ``--no-compare``, the comparison with the prior being beyond an upload's budget;
   ``fallback=error`` is ``--strict``, ``log`` the default), keeps the result in memory
   and answers like ``/api/model``.  The fit runs in a child process within a work
   budget (:mod:`kesbrdf.viewer.fit_job`).
@@ -121,21 +122,24 @@ _MODEL_SUFFIXES = (".kes.json",)
 def load_model_json(path: str | os.PathLike) -> dict:
     """Read and check a model file; return its JSON document unchanged.
 
-    Uses :func:`kesbrdf.models.kes.load` for the full check when it is available, so the
-    error is the one the CLI gives for the same file.
+    Uses :func:`kesbrdf.io.model_file.load_model` for the full check first, so the
+    error is the one the CLI gives for the same file.  A model without its own (φ, γ)
+    table is returned as its tabulated view (:func:`kesbrdf.viewer.upload.view_document`),
+    so the viewer draws every kind.
 
     Raises
     ------
     ModelError
         Not JSON, not a kesbrdf model, or an unknown format version.
     """
+    from kesbrdf.io.model_file import load_model
+
     path = Path(path)
-    try:
-        from kesbrdf.models import kes as model_module
-    except ImportError:  # core model module not available: the format check below stands
-        model_module = None
-    if model_module is not None and hasattr(model_module, "load"):
-        model_module.load(path)  # first, so that the error is the CLI's for the same file
+    model = load_model(path)  # first, so that the error is the CLI's for the same file
+    if not model.has_table:
+        from kesbrdf.viewer.upload import view_document
+
+        return view_document(model)
     from kesbrdf.io.text import decode_text
 
     text = decode_text(path.read_bytes(), path)

@@ -84,13 +84,13 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
         try:
             measurement = read_measurement(csv_path)
             # the same entry point and defaults as `kesbrdf fit`; fallback=error is --strict.
-            # compare=False: the viewer's shaders draw the KES kinds only, so the held-out
-            # comparison with the woven-cloth prior (which may keep a fibre-prior model) is
-            # skipped, as the demo does for its figures and renders (docs/models.md)
+            # compare=False: the held-out comparison with the woven-cloth prior costs several
+            # prior fits, beyond an upload's work budget (kesbrdf.viewer.limits); the viewer
+            # draws any kind through its (phi, gamma) table view (view_document)
             model, _report = fit(measurement, strict=fallback == "error", compare=False)
             out = Path(tmp) / (Path(safe).stem + ".kes.json")
             model.save(out)
-            model_doc = json.loads(out.read_text(encoding="utf-8"))
+            model_doc = view_document(model, json.loads(out.read_text(encoding="utf-8")))
             info = model_doc.get("input")
             if isinstance(info, dict) and str(info.get("name", "")).startswith(prefix):
                 info["name"] = safe  # the upload's name, not the temporary path
@@ -103,6 +103,23 @@ def fit_csv_bytes(data: bytes, name: str = "upload.csv", fallback: str | None = 
                 renamed = KesbrdfError(message)
             raise renamed from None
     return model_doc, measurement_to_json(measurement)
+
+
+def view_document(model, doc: dict | None = None) -> dict:
+    """The model document the viewer's shaders draw: the (φ, γ) table format.
+
+    A model with its own (φ, γ) table is sent as its file document (``doc`` when the
+    caller has read it already); any other kind is sent as its tabulated view
+    (``model.table_view()``, :func:`kesbrdf.models.table.tabulate`), with
+    ``tabulated_from`` naming the model it was drawn from.
+    """
+    from kesbrdf.io.model_file import model_to_dict
+
+    if model.has_table:
+        return doc if doc is not None else model_to_dict(model)
+    view = model_to_dict(model.table_view())
+    view["tabulated_from"] = {"kind": model.kind, "description": model.describe()}
+    return view
 
 
 class UploadTooLarge(KesbrdfError):

@@ -25,7 +25,7 @@ Header lines ``# key: value`` before the column row:
 
 Columns: ``file`` (relative to the manifest's folder), ``kind`` (``sample``, ``white``
 or ``dark``), ``exposure_s`` (> 0), and the geometry in degrees: ``psi_deg``,
-``theta_i_deg``, ``theta_r_deg`` (in-plane, DESIGN §2) and optionally ``phi_i_deg``,
+``theta_i_deg``, ``theta_r_deg`` (in-plane, docs/method.md, "Conventions") and optionally ``phi_i_deg``,
 ``phi_r_deg`` (a general geometry; then ``psi_deg`` may be empty).  Sample rows need a
 geometry, white rows need ``theta_i_deg`` and ``theta_r_deg`` (a Lambertian white is
 isotropic, so ψ is ignored), dark rows need none.  ``roi`` is ``x0,y0,x1,y1`` in pixels,

@@ -1,29 +1,27 @@
-// kesbrdf model evaluation in GLSL ES 3.00, exactly the recipe of docs/formats.md
-// ("How to evaluate a model"). Shared by the real-time preview and the GLSL-Python
-// agreement test, so the test checks the code the preview runs.
+// kesbrdf model evaluation in GLSL (the common subset of GLSL ES 3.00 and #version 410),
+// exactly the recipe of docs/formats.md ("How to evaluate a model"). The one copy: the
+// browser viewer's preview and GLSL check (viewer/src/shaders/kes_table.glsl puts it
+// after its texture uniforms) and the BRDF Explorer export
+// (kesbrdf.export.brdf_explorer.glsl_function puts it after its constant arrays).
 //
-// kesTable: RGBA32F texture, width n_phi (texel i = phi_i = i*2pi/n_phi), height
-// n_gamma (texel j = gamma_j = j*dGamma). Filtering is done here by hand with
-// texelFetch: phi wraps periodically, gamma is clamped, exactly like the numpy lookup.
-uniform highp sampler2D kesTable;
-uniform int kesNPhi;
-uniform int kesNGamma;
-uniform float kesDGamma;
-uniform vec3 kesBody;     // body term c in 1/sr (model's, or base_color/pi for a colourway)
-uniform int kesMapping;   // 0 deviation, 1 halfvector, 2 paper (eq. 3-4 literally)
-// The model file's parameters (docs/formats.md steps 2-3; model.ts KesModel):
-uniform float kesLambda;    // w = max(sqrt(cos_i cos_r), kesLambda*max(cos_i, cos_r)): 0.5 "bounded", 0 "sqrtcos"
-uniform float kesGammaMax;  // last gamma of the table, radians
-uniform float kesFadeSlope; // fade = clamp(1 - (gamma - kesGammaMax)*kesFadeSlope, 0, 1): 1/6deg "fade", 0 "hold"
-uniform float kesLineSum;   // theta_i + theta_r of the fitted incidence line, radians (paper mapping)
+// The host defines, before this text:
+//   vec3 kesFetch(int i, int j)  q(phi_i, gamma_j) per channel, phi_i = i*2pi/kesNPhi,
+//                                gamma_j = j*kesDGamma (texture or constant arrays)
+//   int kesNPhi, kesNGamma; float kesDGamma;  the table's grid
+//   vec3 kesBody               body term c in 1/sr
+//   int kesMapping             0 deviation, 1 halfvector, 2 paper (eq. 3-4 literally)
+//   float kesLambda            w = max(sqrt(cos_i cos_r), kesLambda*max(cos_i, cos_r)):
+//                              0.5 "bounded", 0 "sqrtcos" (kesbrdf.models.mappings)
+//   float kesGammaMax          last gamma of the table, radians
+//   float kesFadeSlope         fade = clamp(1 - (gamma - kesGammaMax)*kesFadeSlope, 0, 1):
+//                              1/6deg "fade", 0 "hold"
+//   float kesLineSum           theta_i + theta_r of the fitted incidence line (paper mapping)
+// as uniforms, constants or macros. Phi wraps periodically and gamma is clamped,
+// exactly like the numpy lookup (kesbrdf.models.kes.lookup).
 
 const float KES_PI = 3.141592653589793;
 const float KES_TWO_PI = 6.283185307179586;
 const float KES_GAMMA0_EPS = 1e-12;
-
-vec3 kesFetch(int i, int j) {
-  return texelFetch(kesTable, ivec2(i, j), 0).rgb;
-}
 
 // Bilinear lookup of q at (phi, gamma): periodic in phi, clamped in gamma.
 vec3 kesLookup(float phi, float gamma) {
@@ -59,18 +57,18 @@ void kesPhiGamma(vec3 wi, vec3 wr, out float phi, out float gamma) {
   phi = atan(s.y, s.x);
 }
 
-// Foreshortening weight w of f_r = c + fade*q/w (kesbrdf.mappings.foreshortening).
+// Foreshortening weight w of f_r = c + fade*q/w (kesbrdf.models.mappings.foreshortening).
 float kesWeight(float cosI, float cosR) {
   return max(sqrt(cosI * cosR), kesLambda * max(cosI, cosR));
 }
 
-// The lobe's factor beyond the last measured gamma (kesbrdf.mappings.fade); 1 for "hold".
+// The lobe's factor beyond the last measured gamma (kesbrdf.models.mappings.fade); 1 for "hold".
 float kesFade(float gamma) {
   return clamp(1.0 - (gamma - kesGammaMax) * kesFadeSlope, 0.0, 1.0);
 }
 
 // sqrt(cos_i cos_r) / w on the incidence line theta_i + theta_r = kesLineSum at |gamma|
-// (kesbrdf.mappings.line_foreshortening); 1 for "sqrtcos".
+// (kesbrdf.models.mappings.line_foreshortening); 1 for "sqrtcos".
 float kesLineRatio(float g) {
   if (kesLambda == 0.0) return 1.0;
   float geo = sqrt(max((cos(g) + cos(kesLineSum)) / 2.0, 0.0));
@@ -78,7 +76,7 @@ float kesLineRatio(float g) {
   return geo / max(geo, kesLambda * cosHi);
 }
 
-// paper eq. 3-4 literally, as kesbrdf.model does it: rho_KES = q*kesLineRatio + body*sqrt(cos(gamma)/2)
+// paper eq. 3-4 literally, as kesbrdf.models.kes does it: rho_KES = q*kesLineRatio + body*sqrt(cos(gamma)/2)
 // (the measured quantity on the theta_i + theta_r = 90 deg line), divided by
 // sqrt(cos theta_i cos theta_r) * sin(beta), sin(beta) clamped at KES_PAPER_MIN_SIN_BETA.
 const float KES_PAPER_MIN_SIN_BETA = 1e-6;
