@@ -101,14 +101,18 @@ _REC709 = np.array([0.2126, 0.7152, 0.0722])
 #: OIDN (docs/rendering.md, "Studio").  Below 0.03 needs 64 spp + OIDN.
 PANEL_RESOLUTION = (480, 360)
 PANEL_SPP = 64
+#: Panels smaller than this are not denoised by default.
+DENOISE_MIN_PIXELS = 128 * 96
 
 
 def default_options(**kw) -> "_scenes.RenderOptions":
     """Render options of a comparison: :data:`PANEL_RESOLUTION`, :data:`PANEL_SPP`,
-    OIDN when installed, area light, no environment."""
-    base = {"spp": PANEL_SPP, "resolution": PANEL_RESOLUTION, "env": "none", "light": "area",
-            "denoise": _scenes.can_denoise()}
+    OIDN when installed (from :data:`DENOISE_MIN_PIXELS` up), area light, no environment."""
+    base = {"spp": PANEL_SPP, "resolution": PANEL_RESOLUTION, "env": "none", "light": "area"}
     base.update(kw)
+    if "denoise" not in kw:  # thumbnails (tests) stay raw: OIDN's set-up costs more than it saves there
+        w, h = base["resolution"]
+        base["denoise"] = _scenes.can_denoise() and int(w) * int(h) >= DENOISE_MIN_PIXELS
     return _scenes.RenderOptions(**base)
 
 
