@@ -81,7 +81,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError, ModelError
-from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.base import register
 from kesbrdf.models.fibre_physics import FibrePrior, fit_prior
 from kesbrdf.models.fibre_prior import (ENERGY_BOUND, FibrePriorModel, bound_energy, fit_kes_candidate, fit_residual,
                                         measured_support)
@@ -440,9 +440,10 @@ class FibreCoordModel(FibrePriorModel):
                 f"prior{' x KES residual' if self.residual is not None else ''}), channels {', '.join(self.channels)}")
 
     def render_plugin(self, mapping=None, extrapolation=None):
-        """The table plugin on :meth:`table_view` (the base class's): no Mitsuba port of
-        (C1) yet, and the ``kesbrdf_prior`` plugin would read only the base prior."""
-        return ReflectanceModel.render_plugin(self, mapping, extrapolation)
+        """The ``kesbrdf_fibre_coord`` plugin (:mod:`kesbrdf.render.fibre_coord_bsdf`: (C1), the
+        residual and the energy scale in Dr.Jit); options as ``fibre-prior``'s plugin."""
+        _, props = super().render_plugin(mapping, extrapolation)
+        return "kesbrdf_fibre_coord", props
 
     @classmethod
     def fit_measurement(cls, measurement, **options):

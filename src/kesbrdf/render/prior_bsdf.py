@@ -82,14 +82,14 @@ def _rgb(a):
     return np.repeat(a, 3, axis=-1) if a.shape[-1] == 1 else a
 
 
-def check_prior_model(path):
-    """Load a model file and check that it is a ``fibre-prior`` model with 1 or 3 channels."""
+def check_prior_model(path, plugin_name: str = PLUGIN, kind: str = "fibre-prior"):
+    """Load a model file and check that ``plugin_name`` draws it (a ``kind`` model) and it has 1 or 3 channels."""
     from kesbrdf.io.model_file import load_model as load
 
     model = load(Path(path))
     plugin, _ = model.render_plugin()
-    if plugin != PLUGIN:
-        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r} "
+    if plugin != plugin_name:
+        raise ModelError(f"{where(path)}the {plugin_name} BSDF reads models of kind {kind!r}, got {model.kind!r} "
                          f"(drawn by the {plugin!r} plugin)")
     if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
@@ -225,8 +225,9 @@ class _Prior:
             total = total + weight * _lobe_rho(_cos_phi(i, r, t), fam["rho"]) * g
         return total / (norm_sum * abs(sp))
 
-    def __call__(self, wi, wr):
-        """f_prior (Color3f) for unit directions above the horizon."""
+    def parts(self, wi, wr):
+        """[warp part, weft part] (Color3f each): Φ(θ_d) k_s,j S_j, so that f_prior = k_d + Σ parts
+        (as :func:`kesbrdf.models.fibre_coord.family_parts`)."""
         s = wi + wr
         norm_sum = dr.norm(s)
         h = s / dr.maximum(norm_sum, 1e-30)
@@ -234,11 +235,18 @@ class _Prior:
         if self.d is not None:
             x = dr.dot(wi, wr)
             phi_td = phi_td * dr.exp(dr.clip(self.d[0] * x + self.d[1] * x * x, -50.0, 50.0))
-        f = mi.Color3f(*[float(k) for k in self.kd])
+        out = []
         for fam in self.families:
             hf, i, r = _frame(h, fam["alpha"]), _frame(wi, fam["alpha"]), _frame(wr, fam["alpha"])
             S = (self._filament if fam["kind"] == "filament" else self._staple)(fam, hf, i, r, norm_sum)
-            f = f + mi.Color3f(*[float(k) for k in fam["ks"]]) * (phi_td * S)
+            out.append(mi.Color3f(*[float(k) for k in fam["ks"]]) * (phi_td * S))
+        return out
+
+    def __call__(self, wi, wr):
+        """f_prior (Color3f) for unit directions above the horizon."""
+        f = mi.Color3f(*[float(k) for k in self.kd])
+        for part in self.parts(wi, wr):
+            f = f + part
         return f
 
 
@@ -305,17 +313,31 @@ class _EnergyScale:
 
 
 class FibrePriorBSDF(FabricBSDF):
-    """Mitsuba BSDF of a ``fibre-prior`` model (module docstring)."""
+    """Mitsuba BSDF of a ``fibre-prior`` model (module docstring).
+
+    Subclasses for kinds that share the residual and energy scale and differ in the
+    prior set :attr:`PLUGIN`, :attr:`KIND` and :meth:`make_prior`
+    (:mod:`kesbrdf.render.fibre_coord_bsdf`).
+    """
+
+    PLUGIN = PLUGIN
+    KIND = "fibre-prior"
+
+    @staticmethod
+    def make_prior(prior):
+        """The Dr.Jit f_prior of the model's prior: callable (wi, wr) -> Color3f with ``kd`` (RGB k_d)."""
+        return _Prior(prior)
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
+        PLUGIN = self.PLUGIN
         filename = _prop(props, "filename")
         if filename is None:
             raise ModelError(f"{PLUGIN} BSDF: expected a 'filename' parameter (a model file), got none")
         path = Path(str(filename))
         if not path.is_absolute() and not path.exists():
             path = Path(str(mi.file_resolver().resolve(str(filename))))
-        model = check_prior_model(path)
+        model = check_prior_model(path, PLUGIN, self.KIND)
         self.filename = str(path)
         self.two_sided = bool(_prop(props, "two_sided", False))
         extrapolation = str(_prop(props, "extrapolation", "hold"))
@@ -326,7 +348,7 @@ class FibrePriorBSDF(FabricBSDF):
             raise ModelError(f"{PLUGIN} BSDF sampling: expected one of {', '.join(SAMPLINGS)}, got {sampling!r}")
         self.sampling = sampling
 
-        self.prior = _Prior(model.prior)
+        self.prior = self.make_prior(model.prior)
         self.residual = None if model.residual is None else _Residual(model.residual)
         self.energy = None if getattr(model, "energy", None) is None else _EnergyScale(model.energy)
         kd = self.prior.kd
@@ -367,7 +389,7 @@ class FibrePriorBSDF(FabricBSDF):
         return dr.select(ok, f, 0.0)
 
     def to_string(self):
-        return (f"FibrePriorBSDF[filename={self.filename!r}, two_sided={self.two_sided}, "
+        return (f"{type(self).__name__}[filename={self.filename!r}, two_sided={self.two_sided}, "
                 f"sampling={self.sampling!r}, lobe_weight={self.sampler.lobe_weight:.3f}]")
 
 
