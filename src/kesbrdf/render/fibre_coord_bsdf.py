@@ -12,7 +12,7 @@ then the KES residual r^τ and the energy scale g(ω_i) g(ω_r) exactly as the
 ``kesbrdf_prior`` plugin (:mod:`kesbrdf.render.prior_bsdf`), whose class this one extends:
 
 * F_k, family k's part of the fitted woven-cloth prior, is
-  :meth:`kesbrdf.render.prior_bsdf._Prior.parts` (the same Dr.Jit code that draws a
+  :meth:`kesbrdf.render.prior_bsdf.PriorDrJit.parts` (the same Dr.Jit code that draws a
   ``fibre-prior`` model);
 * the fibre coordinates of family k (α = 0 warp, 90° weft, no axis offset, as
   :func:`kesbrdf.models.fibre_coord.fibre_coordinates`): the tilt u* = atan2(h'_y, h'_z) and
@@ -37,7 +37,7 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
-from kesbrdf.render.prior_bsdf import FibrePriorBSDF, _Prior, _frame, _rgb
+from kesbrdf.render.prior_bsdf import FibrePriorBSDF, PriorDrJit, family_frame, as_rgb
 
 __all__ = ["FibreCoordBSDF", "register", "PLUGIN"]
 
@@ -75,15 +75,15 @@ class _CoordPrior:
     """(C1) of a :class:`kesbrdf.models.fibre_coord.CoordPrior` in Dr.Jit (module docstring)."""
 
     def __init__(self, prior):
-        from kesbrdf.models.fibre_coord import _FAMILIES, PHI_NODES_DEG, TD_NODES_DEG, U_NODES_DEG
+        from kesbrdf.models.fibre_coord import FAMILIES, PHI_NODES_DEG, TD_NODES_DEG, U_NODES_DEG
 
-        self.base = _Prior(prior.base)
+        self.base = PriorDrJit(prior.base)
         sl, theta = prior.slices(), prior.theta
         #: the corrected k_d e^{δ_0} (RGB): the body of the recolouring
-        self.kd = self.base.kd * _rgb(np.exp(theta[sl["kd"]]))
+        self.kd = self.base.kd * as_rgb(np.exp(theta[sl["kd"]]))
         self.families = []
-        for fam, alpha in _FAMILIES:
-            self.families.append({"alpha": alpha, "scale": _rgb(np.exp(theta[sl[f"{fam}_ks"]])),
+        for fam, alpha in FAMILIES:
+            self.families.append({"alpha": alpha, "scale": as_rgb(np.exp(theta[sl[f"{fam}_ks"]])),
                                   "p": _PiecewiseLinear(U_NODES_DEG, theta[sl[f"{fam}_p"]]),
                                   "n": _PiecewiseLinear(PHI_NODES_DEG, theta[sl[f"{fam}_n"]])})
         self.d = _PiecewiseLinear(TD_NODES_DEG, theta[sl["d"]]) if prior.free_theta_d else None
@@ -94,8 +94,8 @@ class _CoordPrior:
         log_d = self.d(_angle(wi, h)) if self.d is not None else 0.0
         f = mi.Color3f(*[float(k) for k in self.kd])
         for fam, part in zip(self.families, self.base.parts(wi, wr)):
-            hx, hy, hz = _frame(h, fam["alpha"])
-            i, r = _frame(wi, fam["alpha"]), _frame(wr, fam["alpha"])
+            hx, hy, hz = family_frame(h, fam["alpha"])
+            i, r = family_frame(wi, fam["alpha"]), family_frame(wr, fam["alpha"])
             u = dr.atan2(hy, hz)
             t = (0.0, dr.cos(u), -dr.sin(u))
             di, dq = i[0] * t[0] + i[1] * t[1] + i[2] * t[2], r[0] * t[0] + r[1] * t[1] + r[2] * t[2]
