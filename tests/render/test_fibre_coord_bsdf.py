@@ -100,3 +100,24 @@ def test_render_uses_this_plugin(render_module, coord_files, tmp_path):
     assert img.shape[:2] == (24, 32) and np.all(np.isfinite(img))
     # the sphere is lit: its pixels carry light (a broken eval would leave it black)
     assert np.mean(img[..., :3]) > 1e-3
+
+
+#: chi² budget: half of tests/render/test_prior_bsdf.py's samples (one incidence, a fast test).
+CHI2_SAMPLES = 100_000
+
+
+def test_chi2_sampling(render_module, coord_files, tmp_path, monkeypatch):
+    """The inherited half-vector sampler draws this model's lobe: its pdf is its own."""
+    import math
+
+    import mitsuba as mi
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
+
+    monkeypatch.chdir(tmp_path)  # a failing chi² test writes chi2_data.py
+    d = {"type": "kesbrdf_fibre_coord", "filename": str(coord_files["handset"][0])}
+    theta = 0.6
+    wi = mi.ScalarVector3f(math.sin(theta) * math.cos(0.7), math.sin(theta) * math.sin(0.7), math.cos(theta))
+    sample, pdf = BSDFAdapter("kesbrdf_fibre_coord", d, wi=wi)
+    test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3,
+                         sample_count=CHI2_SAMPLES, res=64, ires=16, seed=2)
+    assert test.run(), test.messages
