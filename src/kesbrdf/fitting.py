@@ -224,7 +224,7 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             mask, why_not = fitter_class(name).usable_rows(m)
             options = dict(PRIOR_CANDIDATES[comparison["kept"]])
             why = f"{comparison['kept']} kept by leave-one-orientation-out validation on this data ({comparison['why']})"
-    elif kind == "auto" and compare and not options and not strict and name == "kes-halfdiff":
+    elif check == "dense":
         comparison = _dense_rule(m)
         if comparison and comparison["kept"] != name:
             name = comparison["kept"]

@@ -123,9 +123,9 @@ k.onchange=o.onchange=f.onchange=sortTiles;sortTiles();
 """
 _CSS = """
 body{font:14px system-ui,sans-serif;margin:1em;background:#111;color:#ddd}a{color:#8cf}
-#grid{display:flex;flex-wrap:wrap;gap:8px}.t{width:180px;background:#222;padding:6px;border-radius:4px}
-.t img{width:168px;height:126px;object-fit:cover;background:#000;display:block}
-.ph{width:168px;height:126px;display:flex;align-items:center;justify-content:center;background:#300;color:#f99;
+#grid{display:flex;flex-wrap:wrap;gap:8px}.t{width:268px;background:#222;padding:6px;border-radius:4px}
+.t img{width:256px;height:192px;object-fit:cover;background:#000;display:block}
+.ph{width:256px;height:192px;display:flex;align-items:center;justify-content:center;background:#300;color:#f99;
 font-size:12px;overflow:hidden;text-align:center}.failed{outline:2px solid #a33}.id{font-weight:bold;word-break:break-all}
 .n{font-size:12px;color:#aaa}.e{font-size:11px;color:#f99;word-break:break-word}
 """

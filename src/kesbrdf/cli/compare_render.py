@@ -23,9 +23,12 @@ def add_arguments(p):
                    help="also fit the fibre prior x residual (kind fibre-prior) to the same measurement and "
                         "render it next to the KES model")
     p.add_argument("-o", "--output", required=True, help="panel PNG (the numbers go to <stem>.json)")
-    add_render_options(p, spp=64, resolution="160x120")
-    # one small light in a dark room shows the lobe's shape (kesbrdf.render.compare)
-    p.set_defaults(env="none")
+    add_render_options(p, spp=64, resolution="480x360")
+    # one small light in a dark room shows the lobe's shape; 480x360 at 64 spp + OIDN keeps
+    # the noise floor below FLIP 0.03 (kesbrdf.render.compare.PANEL_SPP)
+    import importlib.util
+
+    p.set_defaults(env="none", denoise=importlib.util.find_spec("pyoidn") is not None)
 
 
 def run(args) -> int:

@@ -392,7 +392,7 @@ def _comparisons(out: Path, reference, say) -> list:
     results = []
     for protocol in compare.PROTOCOLS:
         say(f"compare: {name} rendered by itself and by its {protocol}-protocol model")
-        r = compare.compare_render(name, protocol, "sphere", compare.default_options(spp=32),
+        r = compare.compare_render(name, protocol, "sphere", compare.default_options(),
                                    output=out / "compare" / f"{name}_{protocol}.png")
         stderr(f"    FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
                f"(noise floor {r['noise_flip']:.3f}, {r['noise_rel_rmse']:.3f})")

@@ -48,8 +48,8 @@ one too, registered with :func:`register_fitter`.  :data:`FIT_MODULES` says wher
 lives and :data:`AUTO_CANDIDATES` is the order ``kind="auto"`` tries them in: the first
 candidate that uses every row wins, else the one that uses most (docs/models.md).
 A new kind joins automatic selection with one entry in each.  A fitter's
-``auto_compare`` (``"loo"``, ``"kfold"`` or None) says how ``kind="auto"`` checks its
-choice against the woven-cloth prior on the user's data (:func:`kesbrdf.fit`).
+``auto_compare`` (``"loo"``, ``"kfold"``, ``"dense"`` or None) says how ``kind="auto"``
+checks its choice on the user's data (:func:`kesbrdf.fit`).
 
 Capabilities: consumers ask, never compare kind names
 ----------------------------------------------------
@@ -143,8 +143,9 @@ class ReflectanceModel:
     #: Names of the keyword options ``fit_measurement`` accepts (``kesbrdf.fit`` rejects
     #: the others with a one-line error).
     fit_options: ClassVar[tuple[str, ...]] = ()
-    #: How ``kind="auto"`` checks this fitter's choice against the prior: ``"loo"``
-    #: (leave-one-orientation-out), ``"kfold"`` or None (module docstring).
+    #: How ``kind="auto"`` checks this fitter's choice on the user's data: ``"loo"``
+    #: (leave-one-orientation-out against the prior), ``"kfold"``, ``"dense"`` (the dense
+    #: rule of :func:`kesbrdf.fit`) or None (module docstring).
     auto_compare: ClassVar[str | None] = None
     #: Names of the arrays ``to_payload`` writes and ``from_payload`` needs.
     array_names: ClassVar[tuple[str, ...]] = ()

@@ -180,6 +180,8 @@ class HalfDiffModel(ReflectanceModel):
 
     kind: ClassVar[str] = KIND
     mappings: ClassVar[tuple[str, ...]] = (HALFDIFF,)
+    #: kind="auto" checks a dense choice against the other kinds (fitting._dense_rule)
+    auto_compare: ClassVar[str | None] = "dense"
     array_names: ClassVar[tuple[str, ...]] = _ARRAYS
     fit_options: ClassVar[tuple[str, ...]] = (
         "orientations", "fallback", "body", "noise_floor", "n_phi", "theta_step", "normalisation",

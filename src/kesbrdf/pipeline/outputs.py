@@ -137,9 +137,13 @@ def export(fitted, folder, formats=None, *, stem: str = "model", options: dict |
 
 
 # -- preview ----------------------------------------------------------------------------
-#: Preview render settings (small and fast: one tile of a contact sheet).
-PREVIEW_DEFAULTS = {"scene": "sphere", "spp": 16, "resolution": [128, 96],
-                    "colourway_spp": 4, "colourway_resolution": [64, 48], "colourways": 6}
+#: Preview render settings (one tile of the contact sheet): 256 × 192 in the studio
+#: (soft boxes, windows, ACES, exposure metered on the grey card, docs/rendering.md
+#: "Studio"), denoised by OIDN when installed, so a satin's highlight can be judged.
+PREVIEW_DEFAULTS = {"scene": "sphere", "spp": 16, "resolution": [256, 192],
+                    "colourway_spp": 4, "colourway_resolution": [128, 96], "colourways": 6}
+#: Below this many pixels a preview is not denoised (OIDN's set-up costs more than a few spp).
+PREVIEW_DENOISE_MIN_PIXELS = 128 * 96
 
 
 @dataclass
@@ -154,14 +158,25 @@ def preview(model_path, folder, settings: dict | None = None) -> Preview:
     """Render the saved model (any kind the renderer draws) as a still and a colourway
     sheet into ``folder`` (``preview.png``, ``colourways.png``); ``settings`` overrides
     :data:`PREVIEW_DEFAULTS`."""
+    from dataclasses import replace
+
     from kesbrdf.render import scenes
     from kesbrdf.render.colourways import DEFAULT_COLOURWAYS, render_colourways
+    from kesbrdf.render.exposure import meter_exposure
 
     p = {**PREVIEW_DEFAULTS, **(settings or {})}
     folder = Path(folder)
-    opts = scenes.RenderOptions(spp=int(p["spp"]), resolution=tuple(p["resolution"]))
+
+    def denoise(res):
+        return scenes.can_denoise() and int(res[0]) * int(res[1]) >= PREVIEW_DENOISE_MIN_PIXELS
+
+    res = tuple(p["resolution"])
+    opts = scenes.RenderOptions(spp=int(p["spp"]), resolution=res, env="studio-hdr", light="studio",
+                                tonemap="aces", denoise=denoise(res))
+    opts = replace(opts, exposure=meter_exposure(model_path, p["scene"], opts))  # one grey-card reading
     scenes.render_still(model_path, p["scene"], folder / "preview.png", opts)
-    copts = scenes.RenderOptions(spp=int(p["colourway_spp"]), resolution=tuple(p["colourway_resolution"]))
+    cres = tuple(p["colourway_resolution"])
+    copts = replace(opts, spp=int(p["colourway_spp"]), resolution=cres, denoise=denoise(cres))
     n = int(p["colourways"])
     render_colourways(model_path, folder / "colourways.png", copts, scene=p["scene"],
                       colourways=DEFAULT_COLOURWAYS[:n], columns=min(n, 3))

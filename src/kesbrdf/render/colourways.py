@@ -1,6 +1,7 @@
 """A contact sheet of one garment in several colourways (docs/method.md, "Colour").
 
-Every tile uses the same model, scene, light and camera; only ``base_color`` (the
+Every tile uses the same model, scene, light, camera and exposure (``opts.exposure``,
+the scene's metered exposure in the demo: never one per tile); only ``base_color`` (the
 Lambertian albedo of the dyed body) changes, so the measured lobe, which carries the
 gloss and the anisotropy, is identical in every tile.
 
@@ -38,6 +39,18 @@ DEFAULT_COLOURWAYS: list[tuple[str, tuple[float, float, float] | None]] = [
     ("black", None),
 ]
 MIN_COLOURWAYS = 6
+#: Height of a tile's label bar (pixels) on tiles at least 8 × as tall.
+LABEL_BAR = 28
+
+
+def _font(size: int):
+    """Pillow's default font at ``size`` px (a scalable one from Pillow 10.1; else the bitmap)."""
+    from PIL import ImageFont
+
+    try:
+        return ImageFont.load_default(size=size)
+    except TypeError:  # pragma: no cover - Pillow < 10.1
+        return ImageFont.load_default()
 
 
 def parse_colourways(text: str) -> list[tuple[str, tuple[float, float, float]]]:
@@ -84,11 +97,12 @@ def render_colourways(model_path, output, opts: "_scenes.RenderOptions", scene: 
     for k, (name, rgb) in enumerate(colourways):
         o = replace(opts, base_color=None if rgb is None else tuple(rgb))
         img = _scenes.render_scene(_scenes.load_scene(model_path, scene, o, drape=drape), o)
-        tile = Image.fromarray(_scenes.to_srgb8(img, opts.exposure))
+        tile = Image.fromarray(_scenes.to_srgb8(img, opts.exposure, opts.tonemap))
         draw = ImageDraw.Draw(tile)
         label = f"{name}  (measured body)" if rgb is None else f"{name}  ({', '.join(f'{c:.2f}' for c in rgb)})"
-        draw.rectangle([0, tile.height - 16, tile.width, tile.height], fill=(0, 0, 0))
-        draw.text((4, tile.height - 14), label, fill=(235, 235, 235))
+        bar = LABEL_BAR if tile.height >= 8 * LABEL_BAR else 16
+        draw.rectangle([0, tile.height - bar, tile.width, tile.height], fill=(0, 0, 0))
+        draw.text((6, tile.height - bar + 2), label, fill=(235, 235, 235), font=_font(bar - 6))
         tiles.append(tile)
         if progress is not None:
             progress(k + 1, len(colourways), name)
@@ -117,7 +131,7 @@ def tile_means(sheet_path, n: int, columns: int = 4) -> np.ndarray:
     a = np.asarray(Image.open(sheet_path).convert("RGB"), float) / 255
     rows = -(-n // columns)
     h, w = a.shape[0] // rows, a.shape[1] // min(columns, n)
-    return np.array([a[(k // columns) * h:(k // columns + 1) * h - 16, (k % columns) * w:(k % columns + 1) * w].reshape(-1, 3).mean(0) for k in range(n)])
+    return np.array([a[(k // columns) * h:(k // columns + 1) * h - (LABEL_BAR if h >= 8 * LABEL_BAR else 16), (k % columns) * w:(k % columns + 1) * w].reshape(-1, 3).mean(0) for k in range(n)])
 
 
 def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation") -> dict:

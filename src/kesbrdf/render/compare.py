@@ -94,10 +94,25 @@ FLIP_PPD = 67.0
 _REC709 = np.array([0.2126, 0.7152, 0.0722])
 
 
+#: Panel size and samples of a comparison: 480 × 360 at 64 spp, denoised by OIDN when
+#: pyoidn is installed.  Noise floor (FLIP between two seeds of the reference,
+#: sadeghi-black-satin on the sphere, measured in one run): 0.054 at 32 spp, 0.044 at 64,
+#: 0.034 at 128 without denoising; 0.038 at 16 spp, 0.033 at 32 and 0.028 at 64 with
+#: OIDN (docs/rendering.md, "Studio").  Below 0.03 needs 64 spp + OIDN.
+PANEL_RESOLUTION = (480, 360)
+PANEL_SPP = 64
+#: Panels smaller than this are not denoised by default.
+DENOISE_MIN_PIXELS = 128 * 96
+
+
 def default_options(**kw) -> "_scenes.RenderOptions":
-    """Render options of a comparison: 160x120, 64 spp, area light, no environment."""
-    base = {"spp": 64, "resolution": (160, 120), "env": "none", "light": "area"}
+    """Render options of a comparison: :data:`PANEL_RESOLUTION`, :data:`PANEL_SPP`,
+    OIDN when installed (from :data:`DENOISE_MIN_PIXELS` up), area light, no environment."""
+    base = {"spp": PANEL_SPP, "resolution": PANEL_RESOLUTION, "env": "none", "light": "area"}
     base.update(kw)
+    if "denoise" not in kw:  # thumbnails (tests) stay raw: OIDN's set-up costs more than it saves there
+        w, h = base["resolution"]
+        base["denoise"] = _scenes.can_denoise() and int(w) * int(h) >= DENOISE_MIN_PIXELS
     return _scenes.RenderOptions(**base)
 
 
@@ -208,7 +223,7 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     scene : str
         A scene of :data:`kesbrdf.render.scenes.SCENES` without a drape folder.
     opts : RenderOptions, optional
-        Default :func:`default_options`: 160x120, 64 spp, the area light alone in a dark
+        Default :func:`default_options`: 480x360, 64 spp + OIDN, the area light alone in a dark
         room (``env="none"``): one small source shows the lobe's shape, where a broad
         environment averages it away (and doubles the noise floor at equal spp).
     output : path, optional

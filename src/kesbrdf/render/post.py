@@ -37,7 +37,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CURVES", "aces_filmic", "tonemap", "to_srgb8", "denoise", "srgb_encode"]
+__all__ = ["CURVES", "aces_filmic", "aces_inverse", "exposure_for", "tonemap", "to_srgb8", "denoise", "srgb_encode",
+           "srgb_decode", "WHITE_POINT"]
 
 CURVES = ("aces", "clip")
 #: Pre-scale of Narkowicz's fit (the ACES transform's exposure relative to the fit).
@@ -48,6 +49,48 @@ def aces_filmic(x) -> np.ndarray:
     """Narkowicz's ACES fit T(0.6 x) per channel, for linear x ≥ 0 (negatives → 0)."""
     x = np.maximum(np.asarray(x, np.float64), 0.0) * ACES_PRESCALE
     return np.clip(x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14), 0.0, 1.0)
+
+
+def aces_inverse(y) -> np.ndarray:
+    """The linear x ≥ 0 with :func:`aces_filmic` (x) = y, for display values 0 ≤ y < 1.
+
+    T(u) = y with u = 0.6 x is the quadratic (2.51 − 2.43 y) u² + (0.03 − 0.59 y) u − 0.14 y = 0,
+    whose positive root is taken (its other root is ≤ 0 for y ≥ 0).
+    """
+    y = np.clip(np.asarray(y, np.float64), 0.0, 1.0 - 1e-9)
+    a = 2.51 - 2.43 * y
+    b = 0.03 - 0.59 * y
+    c = -0.14 * y
+    u = (-b + np.sqrt(b * b - 4 * a * c)) / (2 * a)
+    return u / ACES_PRESCALE
+
+
+#: The curve's white point: the linear value (after exposure) shown as display 1.0
+#: (T(0.6 x) reaches 1 at x = 12.07, the root of 0.08 u² − 0.56 u − 0.14 = 0 over 0.6;
+#: above it the channel clips).  Relative to a metered grey card (which sits at
+#: :func:`aces_inverse` (0.18) = 0.217 after exposure) that is 55.6 × the card's
+#: radiance, 5.8 stops above it: a satin highlight up to ~55 × middle grey keeps a
+#: gradient instead of a flat white patch.
+WHITE_POINT = float(aces_inverse(1.0 - 1e-9))
+
+
+def exposure_for(card_radiance: float, target: float = 0.18, curve: str = "aces") -> float:
+    """Exposure (stops) at which a reference of linear radiance ``card_radiance`` is
+    displayed at the linear display value ``target`` (0.18: a grey card reads 18 %).
+
+    The display value is that after the tone curve and before the sRGB encoding, i.e.
+    the sRGB-decoded pixel: 0.18 is sRGB 118/255.
+    """
+    if not (card_radiance > 0 and np.isfinite(card_radiance)):
+        raise ValueError(f"exposure metering: expected a positive reference radiance, got {card_radiance!r}")
+    x = float(aces_inverse(target)) if curve == "aces" else float(target)
+    return float(np.log2(x / card_radiance))
+
+
+def srgb_decode(v) -> np.ndarray:
+    """The inverse of :func:`srgb_encode` (8-bit values / 255 → linear display value)."""
+    v = np.clip(np.asarray(v, np.float64), 0.0, 1.0)
+    return np.where(v <= 0.04045, v / 12.92, np.power((v + 0.055) / 1.055, 2.4))
 
 
 def srgb_encode(x) -> np.ndarray:

@@ -65,7 +65,7 @@ LIGHTS = ("area", "sun", "none", "studio")
 #: Largest image accepted (pixels): 8K UHD.  Bigger requests are a typo, not a render.
 MAX_PIXELS = 7680 * 4320
 #: Floor under the studio soft boxes: dark grey, so the fabric, not the floor, carries the shot.
-STUDIO_FLOOR_ALBEDO = (0.14, 0.14, 0.145)
+STUDIO_FLOOR_ALBEDO = (0.04, 0.04, 0.042)
 #: Diffuse albedo of the mannequin (a warm ivory jersey cover).
 MANNEQUIN_ALBEDO = (0.62, 0.58, 0.52)
 #: Diffuse albedo of floors and dress forms.
@@ -102,6 +102,9 @@ class RenderOptions:
     extrapolation: str | None = "fade"
     tonemap: str = "clip"
     denoise: bool = False
+    #: an 18 % grey card in the frame's lower left, facing the camera
+    #: (:func:`grey_card_box`; the exposure reference of :mod:`kesbrdf.render.exposure`)
+    grey_card: bool = False
     integrator: dict | None = field(default=None, repr=False)
 
     def validate(self) -> "RenderOptions":
@@ -379,8 +382,80 @@ def _dressform_props(workdir: Path) -> dict:
     }
 
 
+#: Grey card: albedo, where its centre projects (normalised device coordinates, x right,
+#: y up, in [−1, 1]), its side as a fraction of the smaller half-extent of the view at
+#: its depth, and how far in front of the subject's centre it stands (units of r).
+GREY_CARD_ALBEDO = 0.18
+GREY_CARD_NDC = (-0.74, -0.6)
+GREY_CARD_SIZE = 0.3
+GREY_CARD_FORWARD = 0.8
+
+
+def _view(opts: RenderOptions, center, radius, direction):
+    """Camera origin, fov (degrees, about the longer axis' rule of :func:`_camera`), and
+    the unit forward, right and up vectors."""
+    w, h = (int(v) for v in opts.resolution)
+    direction = np.asarray(direction, float)
+    direction /= np.linalg.norm(direction)
+    fov = FOV_DEG if w >= h else FOV_DEG * w / h
+    dist = 0.95 * radius / math.sin(math.radians(fov) / 2)
+    origin = np.asarray(center, float) + dist * direction
+    fwd = -direction
+    right = np.cross(fwd, [0.0, 1.0, 0.0])
+    right /= np.linalg.norm(right)
+    up = np.cross(right, fwd)
+    return origin, dist, fov, fwd, right, up
+
+
+def _grey_card_geometry(opts: RenderOptions, center, radius, direction):
+    """(centre, half side, camera origin, camera up) of the grey card of :func:`_grey_card`."""
+    w, h = (int(v) for v in opts.resolution)
+    origin, dist, fov, fwd, right, up = _view(opts, center, radius, direction)
+    depth = dist - GREY_CARD_FORWARD * radius
+    t = math.tan(math.radians(fov) / 2) * depth
+    hw, hh = (t * w / h, t) if w >= h else (t, t * h / w)
+    c = origin + depth * fwd + GREY_CARD_NDC[0] * hw * right + GREY_CARD_NDC[1] * hh * up
+    return c, 0.5 * GREY_CARD_SIZE * min(hw, hh), origin, up
+
+
+def _grey_card(opts: RenderOptions, center, radius, direction) -> dict:
+    """A square 18 % Lambertian card facing the camera, at :data:`GREY_CARD_NDC`."""
+    c, half, origin, up = _grey_card_geometry(opts, center, radius, direction)
+    T = mi.ScalarTransform4f
+    return {"type": "rectangle",
+            "to_world": T().look_at(origin=c.tolist(), target=origin.tolist(), up=up.tolist()) @ T().scale([half, half, 1.0]),
+            "bsdf": _diffuse((GREY_CARD_ALBEDO,) * 3)}
+
+
+#: The exposure meter's view: the card's inner METER_FILL of its side fills the frame.
+METER_FILL = 0.7
+
+
+def _meter_camera(opts: RenderOptions, center, radius, direction, size: int, spp: int) -> dict:
+    """A camera at the still's viewpoint aimed at the grey card, the card filling its
+    ``size`` × ``size`` frame (the meter of :func:`kesbrdf.render.exposure.meter_exposure`)."""
+    c, half, origin, up = _grey_card_geometry(opts, center, radius, direction)
+    fov = 2 * math.degrees(math.atan(METER_FILL * half / float(np.linalg.norm(c - origin))))
+    return {"type": "perspective", "fov": fov,
+            "to_world": mi.ScalarTransform4f().look_at(origin=origin.tolist(), target=c.tolist(), up=up.tolist()),
+            "film": {"type": "hdrfilm", "width": size, "height": size, "pixel_format": "rgb", "rfilter": {"type": "box"}},
+            "sampler": {"type": "independent", "sample_count": int(spp), "seed": 0}}
+
+
+def grey_card_box(resolution, margin: float = 0.25) -> tuple[slice, slice]:
+    """(rows, columns) of the grey card's pixels in an image of ``resolution`` (w, h),
+    shrunk by ``margin`` of its side on each edge (antialiased edges left out)."""
+    w, h = (int(v) for v in resolution)
+    cx = (0.5 + 0.5 * GREY_CARD_NDC[0]) * w
+    cy = (0.5 - 0.5 * GREY_CARD_NDC[1]) * h
+    half = 0.5 * GREY_CARD_SIZE * 0.5 * min(w, h) * (1 - 2 * margin)
+    half = max(half, 0.5)
+    return slice(int(round(cy - half)), int(round(cy + half)) or 1), slice(int(round(cx - half)), int(round(cx + half)) or 1)
+
+
 def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: int | None = None,
-               cloth_bsdf: dict | None = None, framing=None) -> "mi.Scene":
+               cloth_bsdf: dict | None = None, framing=None, subject: bool = True,
+               meter: tuple[int, int] | None = None) -> "mi.Scene":
     """Build and load one scene.
 
     Parameters
@@ -395,6 +470,13 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         Replace the fabric BSDF (benchmarks compare with Mitsuba's own BSDFs).
     framing : (center, radius), optional
         Fix the camera (animations keep one framing for every frame).
+    subject : bool
+        False leaves out the cloth and its props (mannequin, dress form) but keeps the
+        framing, floor, backdrop, lights and grey card: the exposure meter's scene
+        (:func:`kesbrdf.render.exposure.meter_exposure`).
+    meter : (size, spp), optional
+        Replace the camera by the exposure meter's: aimed at the grey card from the
+        still's viewpoint, the card filling a size × size frame (:func:`_meter_camera`).
     """
     validate_choice("scene", scene, SCENES)
     opts.validate()
@@ -466,8 +548,9 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         else:
             center, radius = framing
         d = {"type": "scene"}
-        d.update(shapes)
-        d.update(extra)
+        if subject:
+            d.update(shapes)
+            d.update(extra)
         if floor and opts.floor:
             T = mi.ScalarTransform4f
             d["floor"] = {
@@ -481,10 +564,13 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
             view_dir = (0.12, 0.12, 1.0)  # a fashion shot: nearly level, slightly from the right
             if floor and opts.floor:
                 d["backdrop"] = _backdrop(center, radius)
+        if opts.grey_card:
+            d["grey_card"] = _grey_card(opts, center, radius, view_dir)
         d.update(_lights(opts, center, radius, key_dir))
-        d["sensor"] = _camera(opts, center, radius, view_dir)
+        d["sensor"] = (_camera(opts, center, radius, view_dir) if meter is None
+                       else _meter_camera(opts, center, radius, view_dir, *meter))
         integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
-        if opts.denoise:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
+        if opts.denoise and meter is None:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
             integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
         d["integrator"] = integ
         return mi.load_dict(d)
@@ -514,7 +600,7 @@ def _backdrop(center, radius) -> dict:
     params["vertex_positions"] = v
     params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
     params.update()
-    mesh.set_bsdf(mi.load_dict(_diffuse((0.16, 0.16, 0.17))))
+    mesh.set_bsdf(mi.load_dict(_diffuse(STUDIO_FLOOR_ALBEDO)))
     return mesh
 
 

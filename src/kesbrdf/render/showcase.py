@@ -136,8 +136,14 @@ def run_showcase(model_path, out_dir, spec: ShowcaseSpec = SHOWCASE, name: str =
     drape_dir = Path(drape_dir) if drape_dir is not None else out / f"{name}_drape"
     simulate_drape("garment", drape_dir, spec.sim_frames, overwrite=True, progress=sim_progress,
                    **spec.drape_kwargs())
-    opts = opts or _scenes.studio_options(spec.spp, resolution=tuple(spec.size), max_depth=3)
     frames = clip_frames(spec)
+    if opts is None:  # the studio at the exposure metered on the grey card (docs/rendering.md, "Studio")
+        from dataclasses import replace
+
+        from kesbrdf.render.exposure import meter_exposure
+
+        opts = _scenes.studio_options(spec.spp, resolution=tuple(spec.size), max_depth=3)
+        opts = replace(opts, exposure=meter_exposure(model_path, "garment", opts, drape=drape_dir, frame=frames[0]))
     video = out / f"{name}.mp4"
     gif = out / f"{name}.gif"
     # a preview of a few frames plays them at about one per second of the motion

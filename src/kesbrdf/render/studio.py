@@ -4,27 +4,30 @@ Everything is generated here (nothing is downloaded).  World space is the render
 y up, the camera in front of the subject on +z.
 
 Lights (:func:`studio_lights`), placed around the subject's centre ``c`` at distances
-in units of its bounding radius ``r``, the way a fashion shoot is lit:
+in units of its bounding radius ``r``, the way satin is lit for a fashion shoot:
 
 =========  ============================  ===========  ==========================
 light      direction from c (x, y, z)    size (r)     radiance (relative)
 =========  ============================  ===========  ==========================
-key        (−0.55, 0.55, 0.80), 3.2 r   1.3 × 1.7    1.0  (soft box, camera left)
-fill       (0.85, 0.15, 0.55), 3.5 r    1.8 × 1.8    0.22 (large, dim, right)
-rim        (0.45, 0.50, −0.80), 3.0 r   0.35 × 2.2   1.6  (strip light behind)
-top        (0.0, 1.0, 0.1), 3.0 r       1.6 × 1.6    0.35 (overhead)
+key        (−0.55, 0.55, 0.80), 3.2 r   0.9 × 1.5    1.6  (soft box, camera left)
+fill       (0.85, 0.15, 0.55), 3.5 r    1.4 × 1.4    0.12 (large, dim, right)
+rim        (0.35, 1.0, −0.60), 3.0 r    0.3 × 2.2    2.4  (strip light behind)
+kicker     (−0.9, 0.2, −0.45), 3.0 r    0.25 × 1.8   2.0  (strip, behind left, low)
 =========  ============================  ===========  ==========================
 
-The rectangles face the subject.  A satin's narrow lobe reflects the soft boxes as
-elongated highlights that slide along the folds; the rim strip draws the sheen on the
-far edges of folds.  The absolute scale :data:`KEY_RADIANCE` makes a white diffuse
-card facing the key read about 0.7 after the ACES curve at exposure 0.
+The rectangles face the subject; their solid angles do not depend on r.  A satin's
+narrow lobe reflects the key as an elongated highlight that slides along the folds;
+the rim and kicker strips draw thin sheen lines on the far edges of folds.
 
 Environment (:func:`environment_map`, kind ``"studio-hdr"``): a latitude–longitude HDR
-of a dark grey room (floor 0.02, walls 0.035, ceiling 0.03) with the reflections of
-two large overhead soft boxes (radiance 4) and a vertical strip behind the camera
-(radiance 2.5): what a mirror-like lobe sees away from the area lights.  Mitsuba's
-``sunsky`` emitter (present in Mitsuba ≥ 3.6) can be used instead (``env="sunsky"``).
+of a near-black room (floor 0.008, walls 0.012) with two dim overhead soft boxes, a dim
+strip behind the camera and three bright windows at eye height (:data:`WINDOWS`), which
+a glossy lobe mirrors as thin streaks.  Mitsuba's ``sunsky`` emitter (Mitsuba ≥ 3.6)
+can be used instead (``env="sunsky"``).
+
+Exposure (:func:`kesbrdf.render.exposure.meter_exposure`): metered once per scene on an 18 % grey card in the
+scene's light, the subject left out, and shown at 18 % after the ACES curve; every
+image of the scene shares it (docs/rendering.md, "Studio").
 """
 
 from __future__ import annotations
@@ -33,17 +36,28 @@ import math
 
 import numpy as np
 
-__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle"]
+__all__ = ["STUDIO_LIGHTS", "KEY_RADIANCE", "studio_lights", "environment_map", "look_at_rectangle", "WINDOWS"]
 
 #: (name, direction from the subject, distance / r, (width, height) / r, relative radiance)
 STUDIO_LIGHTS = (
-    ("key", (-0.55, 0.55, 0.80), 3.2, (1.3, 1.7), 1.0),
-    ("fill", (0.85, 0.15, 0.55), 3.5, (1.8, 1.8), 0.22),
-    ("rim", (0.35, 1.0, -0.60), 3.0, (0.35, 2.2), 1.6),
-    ("top", (0.0, 1.0, 0.1), 3.0, (1.6, 1.6), 0.35),
+    ("key", (-0.55, 0.55, 0.80), 3.2, (0.9, 1.5), 1.6),
+    ("fill", (0.85, 0.15, 0.55), 3.5, (1.4, 1.4), 0.12),
+    ("rim", (0.35, 1.0, -0.60), 3.0, (0.3, 2.2), 2.4),
+    ("kicker", (-0.9, 0.2, -0.45), 3.0, (0.25, 1.8), 2.0),
 )
 #: Radiance of the key soft box (W sr⁻¹ m⁻² per unit RGB); slightly warm white.
 KEY_RADIANCE = (6.0, 5.8, 5.5)
+
+
+#: Bright windows in the room (direction from the subject, half width, half height in
+#: gnomonic units, radiance): two tall windows either side and a wide one behind, at eye
+#: height.  A satin's narrow lobe mirrors them as thin bright streaks along the folds,
+#: which the broad soft boxes alone do not draw.
+WINDOWS = (
+    ((-1.0, 0.25, -0.15), 0.12, 0.45, 14.0),
+    ((1.0, 0.3, 0.25), 0.1, 0.4, 12.0),
+    ((0.0, 0.2, -1.0), 0.5, 0.12, 9.0),
+)
 
 
 def look_at_rectangle(mi, origin, target, size, up=(0.0, 1.0, 0.0)):
@@ -87,9 +101,9 @@ def environment_map(width: int = 512) -> np.ndarray:
     d = np.stack([np.sin(th) * np.sin(ph), np.cos(th), -np.sin(th) * np.cos(ph)], -1)
     up = d[..., 1]
     # room: floor, walls, ceiling blended smoothly by elevation
-    wall = 0.035
-    base = np.where(up < 0, 0.02 + (wall - 0.02) * np.exp(-((up / 0.15) ** 2)),
-                    0.03 + (wall - 0.03) * np.exp(-((up / 0.3) ** 2)))
+    wall = 0.012
+    base = np.where(up < 0, 0.008 + (wall - 0.008) * np.exp(-((up / 0.15) ** 2)),
+                    0.01 + (wall - 0.01) * np.exp(-((up / 0.3) ** 2)))
     img = np.repeat(base[..., None], 3, axis=-1) * np.array([1.0, 0.99, 0.97])
 
     def softbox(direction, half_w, half_h, radiance, softness=0.02):
@@ -110,7 +124,10 @@ def environment_map(width: int = 512) -> np.ndarray:
 
         return radiance * edge(x, half_w) * edge(y, half_h)
 
-    boxes = (softbox((-0.35, 1.0, 0.25), 0.35, 0.25, 4.0) + softbox((0.4, 1.0, -0.3), 0.3, 0.3, 3.0)
-             + softbox((0.1, 0.15, 1.0), 0.08, 0.45, 2.5))
+    boxes = (softbox((-0.35, 1.0, 0.25), 0.35, 0.25, 1.2) + softbox((0.4, 1.0, -0.3), 0.3, 0.3, 0.9)
+             + softbox((0.1, 0.15, 1.0), 0.05, 0.45, 1.0))
+    for direction, half_w, half_h, radiance in WINDOWS:
+        boxes = boxes + softbox(direction, half_w, half_h, radiance, softness=0.01)
     img = img + boxes[..., None] * np.array([1.0, 0.98, 0.95])
     return img.astype(np.float32)
+
