@@ -88,6 +88,19 @@ def satin_model(satin_measurement):
     return fit(satin_measurement)
 
 
+# the fibre-coord kind: one quick fit shared by its model and plugin tests
+@pytest.fixture(scope="session")
+def fibre_coord_fit():
+    """(measurement, model): a fibre-coord fit to the Irawan silk charmeuse, paper protocol
+    at 6° steps (56 samples, noise 2 %): filament/filament prior, KES residual."""
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.base import kind_class
+    from kesbrdf.references.irawan2012 import Irawan2012
+
+    m = measure(Irawan2012("silk_charmeuse"), protocol="paper", step_deg=6, noise=0.02, rng=3)
+    return m, kind_class("fibre-coord").fit_measurement(m)
+
+
 # rendering: small model files fitted from reference BRDFs
 def _fit_and_save(path, ref, **fit_kwargs):
     from kesbrdf.measure.gonio import measure

@@ -23,11 +23,9 @@ def _random_pairs(n, seed):
 
 
 @pytest.fixture(scope="module")
-def paper_fit():
-    """A fibre-coord fit to the Irawan silk charmeuse, paper protocol at 6° steps (56 samples)."""
-    ref = Irawan2012("silk_charmeuse")
-    m = measure(ref, protocol="paper", step_deg=6, noise=0.02, rng=3)
-    return m, kind_class("fibre-coord").fit_measurement(m)
+def paper_fit(fibre_coord_fit):
+    """(measurement, model): the shared fit of tests/conftest.py (fibre_coord_fit)."""
+    return fibre_coord_fit
 
 
 def test_pairs_on_a_fibre_cone_have_zero_tilt():

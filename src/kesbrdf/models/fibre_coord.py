@@ -81,13 +81,13 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError, ModelError
-from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.base import register
 from kesbrdf.models.fibre_physics import FibrePrior, fit_prior
 from kesbrdf.models.fibre_prior import (ENERGY_BOUND, FibrePriorModel, bound_energy, fit_kes_candidate, fit_residual,
                                         measured_support)
 
 __all__ = ["CoordPrior", "FibreCoordModel", "fit_coord", "fibre_coordinates", "U_NODES_DEG", "PHI_NODES_DEG",
-           "TD_NODES_DEG", "SMOOTH", "PULL", "PULL_THETA_D"]
+           "TD_NODES_DEG", "SMOOTH", "PULL", "PULL_THETA_D", "FAMILIES"]
 
 #: Nodes of the log tilt density p_k(u) (degrees): 5° apart over the tilts a yarn can have.
 U_NODES_DEG = np.linspace(-85.0, 85.0, 35)
@@ -114,7 +114,8 @@ MIN_SIGMA_LOG = 0.01
 #: Spread of ω_i·ω_r, and count of samples off θ_d = 45°, above which d is free
 #: (fibre_physics.THETA_D_SPREAD and MIN_THETA_D_SAMPLES).
 THETA_D_SPREAD, MIN_THETA_D_SAMPLES = 0.05, 16
-_FAMILIES = (("warp", 0.0), ("weft", math.pi / 2))
+#: The yarn families (name, α): warp along x (α = 0), weft along y.
+FAMILIES = (("warp", 0.0), ("weft", math.pi / 2))
 #: Across-yarn nodes v of Ā (as fibre_physics.V_NODES).
 _V = (np.arange(12) + 0.5) * (np.pi / 12) - np.pi / 2
 
@@ -172,7 +173,7 @@ class _Basis:
         self.w_td = _hat(self.td, TD_NODES_DEG)
         self.kd, parts = family_parts(base, wi, wr)
         self.fam = []
-        for (_, alpha), part in zip(_FAMILIES, parts):
+        for (_, alpha), part in zip(FAMILIES, parts):
             u, phi, _ = fibre_coordinates(wi, wr, alpha)
             self.fam.append((_hat(np.degrees(u), U_NODES_DEG), _hat(np.degrees(phi), PHI_NODES_DEG), part))
 
@@ -218,7 +219,7 @@ class CoordPrior:
     def names(self) -> list[str]:
         C = self.n_channels
         out = [f"dlog_kd_{c}" for c in range(C)]
-        for fam, _ in _FAMILIES:
+        for fam, _ in FAMILIES:
             out += [f"{fam}_dlog_ks_{c}" for c in range(C)]
             out += [f"{fam}_p_{k}" for k in range(U_NODES_DEG.size)]
             out += [f"{fam}_n_{k}" for k in range(PHI_NODES_DEG.size)]
@@ -229,7 +230,7 @@ class CoordPrior:
     def slices(self) -> dict:
         C, U, F = self.n_channels, U_NODES_DEG.size, PHI_NODES_DEG.size
         out, i = {"kd": slice(0, C)}, C
-        for fam, _ in _FAMILIES:
+        for fam, _ in FAMILIES:
             out[f"{fam}_ks"] = slice(i, i + C)
             out[f"{fam}_p"] = slice(i + C, i + C + U)
             out[f"{fam}_n"] = slice(i + C + U, i + C + U + F)
@@ -258,7 +259,7 @@ class CoordPrior:
         spec_sum = np.zeros((N, C))
         if jac:
             J[:, np.arange(C), np.arange(C)] = kd
-        for (fam, _), (wu, wp, part) in zip(_FAMILIES, basis.fam):
+        for (fam, _), (wu, wp, part) in zip(FAMILIES, basis.fam):
             corr = np.exp(np.clip(wu @ theta[sl[f"{fam}_p"]] + wp @ theta[sl[f"{fam}_n"]], -30, 30)) * d  # (N,)
             q = part * np.exp(theta[sl[f"{fam}_ks"]]) * corr[:, None]  # (N, C)
             spec_sum += q
@@ -363,7 +364,7 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
     # 2. MAP of the node values: second differences / smooth, values / pull (toward no correction)
     basis = _Basis(base, wi, wr)
     blocks = []
-    for fam, _ in _FAMILIES:
+    for fam, _ in FAMILIES:
         for key, D in (("p", _second_difference(U_NODES_DEG.size)), ("n", _second_difference(PHI_NODES_DEG.size))):
             s = sl[f"{fam}_{key}"]
             A = np.zeros((D.shape[0], P_))
@@ -440,9 +441,10 @@ class FibreCoordModel(FibrePriorModel):
                 f"prior{' x KES residual' if self.residual is not None else ''}), channels {', '.join(self.channels)}")
 
     def render_plugin(self, mapping=None, extrapolation=None):
-        """The table plugin on :meth:`table_view` (the base class's): no Mitsuba port of
-        (C1) yet, and the ``kesbrdf_prior`` plugin would read only the base prior."""
-        return ReflectanceModel.render_plugin(self, mapping, extrapolation)
+        """The ``kesbrdf_fibre_coord`` plugin (:mod:`kesbrdf.render.fibre_coord_bsdf`: (C1), the
+        residual and the energy scale in Dr.Jit); options as ``fibre-prior``'s plugin."""
+        _, props = super().render_plugin(mapping, extrapolation)
+        return "kesbrdf_fibre_coord", props
 
     @classmethod
     def fit_measurement(cls, measurement, **options):

@@ -3,7 +3,8 @@
 ``import kesbrdf.render`` selects the ``llvm_ad_rgb`` variant when no variant is set
 yet, and registers the BSDF plugins ``kesbrdf`` (:mod:`kesbrdf.render.bsdf`, kind ``kes``),
 ``kesbrdf_halfdiff`` (:mod:`~kesbrdf.render.halfdiff_bsdf`, kind ``kes-halfdiff``),
-``kesbrdf_prior`` (:mod:`~kesbrdf.render.prior_bsdf`, kind ``fibre-prior``) and the
+``kesbrdf_prior`` (:mod:`~kesbrdf.render.prior_bsdf`, kind ``fibre-prior``),
+``kesbrdf_fibre_coord`` (:mod:`~kesbrdf.render.fibre_coord_bsdf`, kind ``fibre-coord``) and the
 reference BSDFs (:mod:`~kesbrdf.render.reference_bsdf`).  Dr.Jit's
 LLVM backend needs LLVM ≥ 17 (docs/architecture.md, "Tools it runs on"); when ``DRJIT_LIBLLVM_PATH`` is unset and
 Debian's ``libllvm19`` is installed, it is pointed at that library.
@@ -44,5 +45,9 @@ _halfdiff_bsdf.register()
 from kesbrdf.render import prior_bsdf as _prior_bsdf  # noqa: E402
 
 _prior_bsdf.register()
+
+from kesbrdf.render import fibre_coord_bsdf as _fibre_coord_bsdf  # noqa: E402
+
+_fibre_coord_bsdf.register()
 
 __all__ = ["KesBSDF", "register", "VARIANT"]

@@ -59,7 +59,8 @@ from kesbrdf.optics import fresnel_dielectric
 from kesbrdf.render.bsdf import EXTRAPOLATIONS, SAMPLINGS, FabricBSDF, KesTable, parse_rgb, phi_gamma
 from kesbrdf.render.halfdiff_bsdf import HalfDiffTable, half_diff
 
-__all__ = ["FibrePriorBSDF", "register", "check_prior_model", "lobe_table", "PLUGIN"]
+__all__ = ["FibrePriorBSDF", "PriorDrJit", "family_frame", "as_rgb", "register", "check_prior_model", "lobe_table",
+           "PLUGIN"]
 
 #: Name of the plugin.
 PLUGIN = "kesbrdf_prior"
@@ -77,19 +78,20 @@ def _prop(props, name, default=None):
     return props[name] if name in props else default
 
 
-def _rgb(a):
+def as_rgb(a):
+    """Per-channel values (..., 1 or 3) as RGB (..., 3): a grey channel repeated."""
     a = np.asarray(a, float)
     return np.repeat(a, 3, axis=-1) if a.shape[-1] == 1 else a
 
 
-def check_prior_model(path):
-    """Load a model file and check that it is a ``fibre-prior`` model with 1 or 3 channels."""
+def check_prior_model(path, plugin_name: str = PLUGIN, kind: str = "fibre-prior"):
+    """Load a model file and check that ``plugin_name`` draws it (a ``kind`` model) and it has 1 or 3 channels."""
     from kesbrdf.io.model_file import load_model as load
 
     model = load(Path(path))
     plugin, _ = model.render_plugin()
-    if plugin != PLUGIN:
-        raise ModelError(f"{where(path)}the {PLUGIN} BSDF reads models of kind 'fibre-prior', got {model.kind!r} "
+    if plugin != plugin_name:
+        raise ModelError(f"{where(path)}the {plugin_name} BSDF reads models of kind {kind!r}, got {model.kind!r} "
                          f"(drawn by the {plugin!r} plugin)")
     if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}expected 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
@@ -151,13 +153,13 @@ def _cos_phi(wi, wr, t):
     return dr.clip(dr.select(den > 1e-30, _dot(pi, pr) / dr.maximum(den, 1e-30), 1.0), -1.0, 1.0)
 
 
-def _frame(w, alpha: float):
+def family_frame(w, alpha: float):
     """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.models.fibre_physics's family frame."""
     s, c = math.sin(alpha), math.cos(alpha)
     return (s * w.x - c * w.y, c * w.x + s * w.y, w.z)
 
 
-class _Prior:
+class PriorDrJit:
     """f_prior of a :class:`kesbrdf.models.fibre_physics.FibrePrior` in Dr.Jit (module docstring)."""
 
     def __init__(self, prior):
@@ -167,14 +169,14 @@ class _Prior:
         spec = prior.spec
         p = prior.parameters()
         C = spec.n_channels
-        self.kd = _rgb(np.exp([p[f"log_kd_{c}"] for c in range(C)]))
+        self.kd = as_rgb(np.exp([p[f"log_kd_{c}"] for c in range(C)]))
         self.offset = p["axis_offset"] if spec.free_axes else 0.0
         self.d = (p["d1"], p["d2"]) if spec.free_theta_d else None
         self.f45 = float(fresnel_dielectric(math.cos(math.pi / 4), P.THETA_D_ETA))
         self.families = []
         for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, math.pi / 2)):
             lo, hi, log_s, c2, rho = (p[f"{fam}_{k}"] for k in ("u_lo", "u_hi", "log_s", "c2", "rho"))
-            ks = _rgb(np.exp([p[f"{fam}_log_ks_{c}"] for c in range(C)]))
+            ks = as_rgb(np.exp([p[f"{fam}_log_ks_{c}"] for c in range(C)]))
             entry = {"kind": kind, "alpha": alpha + self.offset, "ks": ks, "rho": rho,
                      "shape": (lo, hi, math.exp(log_s), c2)}
             if kind == "staple":
@@ -225,8 +227,9 @@ class _Prior:
             total = total + weight * _lobe_rho(_cos_phi(i, r, t), fam["rho"]) * g
         return total / (norm_sum * abs(sp))
 
-    def __call__(self, wi, wr):
-        """f_prior (Color3f) for unit directions above the horizon."""
+    def parts(self, wi, wr):
+        """[warp part, weft part] (Color3f each): Φ(θ_d) k_s,j S_j, so that f_prior = k_d + Σ parts
+        (as :func:`kesbrdf.models.fibre_coord.family_parts`)."""
         s = wi + wr
         norm_sum = dr.norm(s)
         h = s / dr.maximum(norm_sum, 1e-30)
@@ -234,11 +237,18 @@ class _Prior:
         if self.d is not None:
             x = dr.dot(wi, wr)
             phi_td = phi_td * dr.exp(dr.clip(self.d[0] * x + self.d[1] * x * x, -50.0, 50.0))
-        f = mi.Color3f(*[float(k) for k in self.kd])
+        out = []
         for fam in self.families:
-            hf, i, r = _frame(h, fam["alpha"]), _frame(wi, fam["alpha"]), _frame(wr, fam["alpha"])
+            hf, i, r = family_frame(h, fam["alpha"]), family_frame(wi, fam["alpha"]), family_frame(wr, fam["alpha"])
             S = (self._filament if fam["kind"] == "filament" else self._staple)(fam, hf, i, r, norm_sum)
-            f = f + mi.Color3f(*[float(k) for k in fam["ks"]]) * (phi_td * S)
+            out.append(mi.Color3f(*[float(k) for k in fam["ks"]]) * (phi_td * S))
+        return out
+
+    def __call__(self, wi, wr):
+        """f_prior (Color3f) for unit directions above the horizon."""
+        f = mi.Color3f(*[float(k) for k in self.kd])
+        for part in self.parts(wi, wr):
+            f = f + part
         return f
 
 
@@ -249,7 +259,7 @@ class _Residual:
         from kesbrdf.models.fibre_prior import RELAX_DEG
 
         self.relax = 1.0 / math.radians(RELAX_DEG)
-        table = np.clip(np.nan_to_num(_rgb(res.table)), 0.0, None)
+        table = np.clip(np.nan_to_num(as_rgb(res.table)), 0.0, None)
         self.mode = getattr(res, "mode", "line")
         if self.mode == "halfdiff":
             self.table = HalfDiffTable(table, res.theta_h_grid, res.theta_d_grid)
@@ -280,7 +290,7 @@ class _EnergyScale:
     cos θ nodes and φ nodes on the half circle (periodic)."""
 
     def __init__(self, energy):
-        scale = _rgb(np.asarray(energy.scale, float))  # (n_mu, n_phi, 3)
+        scale = as_rgb(np.asarray(energy.scale, float))  # (n_mu, n_phi, 3)
         self.n_mu, self.n_phi = scale.shape[:2]
         self.table = [mi.Float(np.ascontiguousarray(scale[..., c]).ravel()) for c in range(3)]
 
@@ -305,17 +315,31 @@ class _EnergyScale:
 
 
 class FibrePriorBSDF(FabricBSDF):
-    """Mitsuba BSDF of a ``fibre-prior`` model (module docstring)."""
+    """Mitsuba BSDF of a ``fibre-prior`` model (module docstring).
+
+    Subclasses for kinds that share the residual and energy scale and differ in the
+    prior set :attr:`PLUGIN`, :attr:`KIND` and :meth:`make_prior`
+    (:mod:`kesbrdf.render.fibre_coord_bsdf`).
+    """
+
+    PLUGIN = PLUGIN
+    KIND = "fibre-prior"
+
+    @staticmethod
+    def make_prior(prior):
+        """The Dr.Jit f_prior of the model's prior: callable (wi, wr) -> Color3f with ``kd`` (RGB k_d)."""
+        return PriorDrJit(prior)
 
     def __init__(self, props):
         mi.BSDF.__init__(self, props)
+        PLUGIN = self.PLUGIN
         filename = _prop(props, "filename")
         if filename is None:
             raise ModelError(f"{PLUGIN} BSDF: expected a 'filename' parameter (a model file), got none")
         path = Path(str(filename))
         if not path.is_absolute() and not path.exists():
             path = Path(str(mi.file_resolver().resolve(str(filename))))
-        model = check_prior_model(path)
+        model = check_prior_model(path, PLUGIN, self.KIND)
         self.filename = str(path)
         self.two_sided = bool(_prop(props, "two_sided", False))
         extrapolation = str(_prop(props, "extrapolation", "hold"))
@@ -326,7 +350,7 @@ class FibrePriorBSDF(FabricBSDF):
             raise ModelError(f"{PLUGIN} BSDF sampling: expected one of {', '.join(SAMPLINGS)}, got {sampling!r}")
         self.sampling = sampling
 
-        self.prior = _Prior(model.prior)
+        self.prior = self.make_prior(model.prior)
         self.residual = None if model.residual is None else _Residual(model.residual)
         self.energy = None if getattr(model, "energy", None) is None else _EnergyScale(model.energy)
         kd = self.prior.kd
@@ -367,7 +391,7 @@ class FibrePriorBSDF(FabricBSDF):
         return dr.select(ok, f, 0.0)
 
     def to_string(self):
-        return (f"FibrePriorBSDF[filename={self.filename!r}, two_sided={self.two_sided}, "
+        return (f"{type(self).__name__}[filename={self.filename!r}, two_sided={self.two_sided}, "
                 f"sampling={self.sampling!r}, lobe_weight={self.sampler.lobe_weight:.3f}]")
 
 
