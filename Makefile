@@ -45,10 +45,15 @@ showcase: venv
 # The suite includes the doctests of src/kesbrdf (tests/test_doctests.py) and a few
 # thousand fuzz examples per reader (tests/fuzz).  Two workers (pytest-xdist), one per
 # core; a test file stays on one worker so its module fixtures are built once.
+# Tests marked `slow` (acceptance sweeps over whole fits, e.g. dense vs paper protocol on a
+# satin) run in `make test-long`, which CI runs after `make test`.
 PYTEST_WORKERS ?= 2
 test: venv $(if $(shell command -v npm 2>/dev/null),viewer)
-	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) --dist loadfile -m "not slow"
 	@if [ -f viewer/package.json ]; then $(MAKE) --no-print-directory test-web; fi
+
+test-long: venv
+	$(PY) -m pytest -q -n $(PYTEST_WORKERS) -m slow
 
 test-web: venv viewer
 	cd viewer && npm run build -- --outDir ../build/viewer-check --emptyOutDir >/dev/null && \
