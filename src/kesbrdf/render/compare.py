@@ -211,6 +211,36 @@ def compare_images(reference: np.ndarray, test: np.ndarray, mask: np.ndarray, ex
             "_ref8": ref8, "_test8": tst8}
 
 
+#: The reference's own renders (cloth mask, seed-``opts.seed`` image, seed+1 image or
+#: None) by (reference, scene, options, parameters): they do not depend on the protocol,
+#: so comparing both protocols renders the reference once, not twice (issue 17).  With
+#: fixed seeds a new render differs from the cached one only by the renderer's run-to-run
+#: float differences (~1e-4 in FLIP), far below the noise floor.  A few entries of two
+#: 480x360 float images each.
+_REFERENCE_RENDERS: dict = {}
+_REFERENCE_RENDERS_MAX = 4
+
+
+def _reference_renders(reference: str, scene: str, opts, o2, params, noise_floor: bool):
+    """(mask, reference image, second-seed reference image or None), rendered or cached."""
+    key = (reference, scene, repr(opts), repr(o2), json.dumps(params, sort_keys=True, default=str))
+    got = _REFERENCE_RENDERS.get(key)
+    if got is not None and (got[2] is not None or not noise_floor):  # copies: callers own their arrays
+        return got[0].copy(), got[1].copy(), got[2].copy() if noise_floor else None
+    ref_bsdf = reference_bsdf_dict(reference, two_sided=opts.two_sided, params=params, sampling=opts.sampling)
+    ref_scene = _scenes.load_scene(None, scene, opts, cloth_bsdf=ref_bsdf)
+    mask = cloth_mask(ref_scene)
+    img_ref = _scenes.render_scene(ref_scene, opts)
+    del ref_scene
+    img_ref2 = None
+    if noise_floor:
+        img_ref2 = _scenes.render_scene(_scenes.load_scene(None, scene, o2, cloth_bsdf=ref_bsdf), o2)
+    if len(_REFERENCE_RENDERS) >= _REFERENCE_RENDERS_MAX:
+        _REFERENCE_RENDERS.pop(next(iter(_REFERENCE_RENDERS)))
+    _REFERENCE_RENDERS[key] = (mask.copy(), img_ref.copy(), None if img_ref2 is None else img_ref2.copy())
+    return mask, img_ref, img_ref2
+
+
 def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere", opts=None,
                    output=None, params=None, noise_floor: bool = True, models=("kes",)) -> dict:
     """Render ``scene`` with the reference and with its fitted model(s); compare.
@@ -260,18 +290,12 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     o2 = replace(opts, seed=int(opts.seed) + 1)
     images = {}
     with tempfile.TemporaryDirectory(prefix="kesbrdf-compare-") as tmp:
-        ref_bsdf = reference_bsdf_dict(reference, two_sided=opts.two_sided, params=params, sampling=opts.sampling)
-        ref_scene = _scenes.load_scene(None, scene, opts, cloth_bsdf=ref_bsdf)
-        mask = cloth_mask(ref_scene)
-        img_ref = _scenes.render_scene(ref_scene, opts)
+        mask, img_ref, img_ref2 = _reference_renders(reference, scene, opts, o2, params, noise_floor)
         for mo, model in fitted.items():
             model_path = Path(tmp) / f"{mo}.kes.json"
             model.save(model_path)
             mod_scene = _scenes.load_scene(None, scene, o2, cloth_bsdf=model_bsdf_dict(model_path, model, o2))
             images[mo] = _scenes.render_scene(mod_scene, o2)
-        img_ref2 = None
-        if noise_floor:
-            img_ref2 = _scenes.render_scene(_scenes.load_scene(None, scene, o2, cloth_bsdf=ref_bsdf), o2)
     exposure = auto_exposure(img_ref, mask) + float(opts.exposure)
     results = {mo: compare_images(img_ref, img, mask, exposure) for mo, img in images.items()}
     first = results[models[0]]
