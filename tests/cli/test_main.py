@@ -94,6 +94,11 @@ def test_demo_quick(tmp_path):
     prior_map = 'id="fig-6-uncertainty"' if load_model(out / "model.kes.json").has_sigma else 'id="fig-6-prior-uncertainty"'
     for anchor in ("<h3>Model comparison</h3>", 'id="fig-plan"', prior_map):
         assert anchor in html
+    # issue 17: the time table counts the child processes' CPU too (the budget is the
+    # whole demo's), so the total with children is never below the process's own
+    t = json.loads((out / "demo_times.json").read_text())
+    assert t["children_cpu_s"] >= 0
+    assert t["total_cpu_with_children_s"] == pytest.approx(t["total_cpu_s"] + t["children_cpu_s"], abs=0.02)
 
 
 def test_fit_routes_scattered_data_and_validate_uses_its_frame(tmp_path, capsys):

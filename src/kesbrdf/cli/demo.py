@@ -37,6 +37,18 @@ def _have(module: str) -> bool:
         return False
 
 
+def _children_cpu() -> float:
+    """User + system CPU seconds of the finished, waited-for child processes.
+
+    The issue 17 budget (≤ 200 s CPU) counts the whole demo, like ``/usr/bin/time``: the
+    steps moved into background processes must not drop out of the total.
+    """
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 class _Stages:
     """Prints each step with the elapsed time, and the time per step at the end.
 
@@ -47,6 +59,7 @@ class _Stages:
     def __init__(self):
         self.t0 = time.perf_counter()
         self.c0 = time.process_time()
+        self.children0 = _children_cpu()
         self.done: list[str] = []
         self.steps: list[tuple[str, float, float]] = []  # (name, wall start, cpu start) of the top-level steps
 
@@ -78,9 +91,15 @@ class _Stages:
         for n, t, c in rows:
             stderr(f"  {t:7.1f}s {c:7.1f}s  {n}")
         stderr(f"  {total:7.1f}s {cpu:7.1f}s  total")
+        children = _children_cpu() - self.children0
+        stderr(f"  CPU of child processes (background compare and drapes, Dask workers, Blender, Chromium): "
+               f"{children:.1f} s; demo and children: {cpu + children:.1f} s")
         steps = [{"step": n, "wall_s": round(t, 2), "cpu_s": round(c, 2)} for n, t, c in rows]
         write_text(out / "demo_times.json", json.dumps({"steps": steps, "total_wall_s": round(total, 2),
-                                                        "total_cpu_s": round(cpu, 2)}, indent=1) + "\n")
+                                                        "total_cpu_s": round(cpu, 2),
+                                                        "children_cpu_s": round(children, 2),
+                                                        "total_cpu_with_children_s": round(cpu + children, 2)},
+                                                       indent=1) + "\n")
 
 
 class _EarlyCluster:
@@ -124,9 +143,27 @@ class _EarlyCluster:
             self.cluster.close()
 
 
+#: Niceness of the demo's background processes: the foreground steps (fit, validate,
+#: plan, exports, figures) are the demo's critical path, the background work is needed
+#: only later, so on two busy cores the foreground goes first.
+BACKGROUND_NICE = 5
+
+
+def _lower_priority() -> None:
+    import os
+
+    if hasattr(os, "nice"):
+        try:
+            os.nice(BACKGROUND_NICE)
+        except OSError:  # pragma: no cover - not permitted: run at the same priority
+            pass
+
+
 def _simulate_demo_drapes(out: str) -> float:
     """Both drapes of the demo (sheet, skirt), in a background process; returns its CPU s."""
     from kesbrdf.cloth.drape import simulate_drape
+
+    _lower_priority()
     from kesbrdf.render.showcase import PREVIEW
 
     c0 = time.process_time()
@@ -148,6 +185,7 @@ def _compare_in_background(out: str, name: str) -> list:
     """
     from kesbrdf.render import compare
 
+    _lower_priority()
     rows = []
     for protocol in compare.PROTOCOLS:
         t0, c0 = time.perf_counter(), time.process_time()
