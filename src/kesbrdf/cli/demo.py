@@ -242,6 +242,11 @@ class _EarlyBatch:
             client = None
             try:
                 client = cluster.client()
+                if client is not None:
+                    try:  # the workers too yield to the foreground steps
+                        client.run(_lower_priority)
+                    except Exception:  # noqa: BLE001 - only a priority; the batch runs regardless
+                        pass
                 self.result = run_demo_batch(out / "batch", quick=quick, progress=self.lines.append,
                                              scheduler=client)
             except BaseException as exc:  # noqa: BLE001 - re-raised at the batch step
