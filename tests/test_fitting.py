@@ -22,9 +22,18 @@ KES_ON_DENSE_NRMSE_MIN = 0.05
 WARD = AnisotropicWard(0.12, 0.3, rho_d=0.1, rho_s=0.1)
 
 
-def test_paper_protocol_gives_kes_using_every_row():
+@pytest.fixture(scope="module")
+def ward_auto():
+    """``kesbrdf.fit`` (kind auto) of the paper protocol on :data:`WARD`: (measurement,
+    model, report).  Fitted once for the module: the auto rule's leave-one-orientation-out
+    comparison with the fibre prior costs ~9 s CPU, and three tests read the same fit."""
     m = measure(WARD)
     model, report = kesbrdf.fit(m)
+    return m, model, report
+
+
+def test_paper_protocol_gives_kes_using_every_row(ward_auto):
+    m, model, report = ward_auto
     assert (model.kind, report.fitter) == ("kes", "kes")
     assert report.rows_used == report.rows_total == len(m) == 116
     assert report.rows_unused == ""
@@ -91,8 +100,8 @@ def test_no_kind_fits_names_why():
         kesbrdf.fit(m)
 
 
-def test_report_is_recorded_in_the_model_file(tmp_path):
-    model, report = kesbrdf.fit(measure(WARD))
+def test_report_is_recorded_in_the_model_file(tmp_path, ward_auto):
+    _, model, report = ward_auto
     doc = json.loads(model.save(tmp_path / "m.kes.json").read_text())
     assert doc["diagnostics"]["fit_report"]["kind"] == "kes"
     assert doc["diagnostics"]["fit_report"]["rows_used"] == report.rows_used
@@ -126,14 +135,13 @@ def test_a_new_fitter_joins_auto_selection(monkeypatch):
     assert report.fitter == "everything" and report.rows_used == len(m)
 
 
-def test_auto_compares_with_the_prior_on_held_out_orientations():
+def test_auto_compares_with_the_prior_on_held_out_orientations(ward_auto):
     """Paper protocol: kes and the fibre prior are compared leave-one-orientation-out
     (kesbrdf.validate.selection.choose).  Ward is symmetric in y, so the bias errors cannot
     decide; the pure prior does not beat interpolation over ψ on all four orientations
     (a microfacet lobe is outside its family), and kes is kept, as the oracle of
     benchmarks/bench_selection.py says for both Ward references."""
-    m = measure(WARD)
-    model, report = kesbrdf.fit(m)
+    m, model, report = ward_auto
     c = report.comparison
     assert c is not None and {"kes", "prior", "prior+residual"} <= set(c["median_biases"])
     assert c["mirror"]["symmetric"]

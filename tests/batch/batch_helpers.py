@@ -5,8 +5,12 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-#: good fabrics in the shared library (every 3rd from camera frames), plus broken ones
-N_GOOD = 6
+#: good fabrics in the shared library (every 3rd from camera frames), plus broken ones.
+#: Four cover each reference family (Sadeghi, Ward, Ashikhmin-Shirley) and the
+#: camera-frame input (fabric-003); the tests are about orchestration (skips, retries,
+#: kills, timeouts), and every good fabric's fit is ``kesbrdf fit``'s auto rule (~9 s CPU
+#: with the fibre-prior comparison) in each of ~10 fresh runs, so six cost ~170 s more.
+N_GOOD = 4
 N_BROKEN = 3
 
 

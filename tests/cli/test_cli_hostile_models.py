@@ -100,11 +100,13 @@ def argv(command: str, model, base, out):
         return ["eval", str(model), "--pairs", str(base / "pairs.csv"), "-o", str(out / "f.csv")]
     if command == "export":
         return ["export", str(model), "--format", "brdf-explorer", "-o", str(out / "m.brdf")]
+    if command == "render":  # the model is refused before "rendering ..." is printed (one line in all)
+        return ["render", str(model), "-o", str(out / "r.png"), "--spp", "1", "--resolution", "16x12"]
     return ["validate", str(model), str(base / "meas.csv"), "--json", str(out / "v.json")]
 
 
 @pytest.mark.parametrize("case", CASES)
-@pytest.mark.parametrize("command", ("eval", "export", "validate"))
+@pytest.mark.parametrize("command", ("eval", "export", "validate", "render"))
 def test_hostile_model_is_refused_in_one_line(base, tmp_path, capsys, command, case):
     model, words = hostile(base, case)
     capsys.readouterr()

@@ -9,10 +9,14 @@ import pytest
 from kesbrdf.cli.main import main
 
 
-@pytest.fixture
-def fitted(tmp_path):
-    meas = tmp_path / "meas.csv"
-    model = tmp_path / "model.kes.json"
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """A simulated measurement and its `kesbrdf fit` model (read-only for the tests).
+    Module-scoped: the auto fit compares with the fibre prior (~10 s CPU), once for the
+    three tests that read it."""
+    d = tmp_path_factory.mktemp("fitted")
+    meas = d / "meas.csv"
+    model = d / "model.kes.json"
     assert main(["simulate", "--reference", "ward", "-o", str(meas), "--noise", "0.01"]) == 0
     assert main(["fit", str(meas), "-o", str(model)]) == 0
     return meas, model

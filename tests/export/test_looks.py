@@ -167,9 +167,10 @@ def test_openpbr_to_principled_dims_the_body_under_a_tinted_specular():
 
 def test_studio_scene_lights_face_the_subject_with_the_studio_radiance():
     """Every soft box's quad (the corners both renderers get) faces the scene centre, with
-    the size and radiance of kesbrdf.render.studio."""
+    the size and radiance of the look scene's own lights (kesbrdf.export.looks.LOOK_LIGHTS)."""
+    from kesbrdf.export.looks import LOOK_LIGHTS as STUDIO_LIGHTS
     from kesbrdf.export.looks import studio_scene
-    from kesbrdf.render.studio import KEY_RADIANCE, STUDIO_LIGHTS
+    from kesbrdf.render.studio import KEY_RADIANCE
 
     sc = studio_scene((64, 48))
     c, r = np.asarray(sc["center"]), sc["radius"]

@@ -143,6 +143,9 @@ def run(args) -> int:
         note = f" ({len(kept)} frame(s) kept from an earlier run)" if kept else ""
         stderr(f"wrote {out}{note}")
         return 0
+    from kesbrdf.io.model_file import load_model
+
+    load_model(args.model)  # a bad model file is the one line on stderr, before any "rendering ..."
     stderr(f"rendering {args.scene} at {opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
     out = scenes.render_still(args.model, args.scene, args.output, opts, drape=args.drape, frame=args.frame)
     stderr(f"wrote {out}")

@@ -23,7 +23,7 @@ format            renderer (what reads the file)
 
 Scene (:func:`studio_scene`, y-up, metres): a UV sphere (warp along the parallels)
 and the procedural folded cloth (:func:`kesbrdf.render.mesh.folded_cloth`, warp across
-the folds) side by side on a dark floor (:data:`kesbrdf.render.scenes.STUDIO_FLOOR_ALBEDO`),
+the folds) side by side on a grey floor (:data:`LOOK_FLOOR_ALBEDO`),
 under the four soft boxes of :mod:`kesbrdf.render.studio`, no environment; the camera
 of :mod:`kesbrdf.render.scenes` (vertical FOV :data:`~kesbrdf.render.scenes.FOV_DEG`)
 looks at the pair from the front and above.  Both renderers get the same triangles,
@@ -150,6 +150,21 @@ def _sphere(center, radius, n_u: int = 64, n_v: int = 32):
     return p, n, np.stack([u, v], -1).reshape(-1, 2), faces[area > 1e-12]
 
 
+#: The look scene's own soft boxes: (name, direction from the subject, distance / r,
+#: (width, height) / r, radiance relative to KEY_RADIANCE).  The look check is an
+#: instrument, so its light is fixed here and not the demo studio's
+#: (:data:`kesbrdf.render.studio.STUDIO_LIGHTS`, tuned for photographs of satin): the
+#: bounds in tests/export/test_looks.py were measured under these lights.
+LOOK_LIGHTS = (
+    ("key", (-0.55, 0.55, 0.80), 3.2, (1.3, 1.7), 1.0),
+    ("fill", (0.85, 0.15, 0.55), 3.5, (1.8, 1.8), 0.22),
+    ("rim", (0.35, 1.0, -0.60), 3.0, (0.35, 2.2), 1.6),
+    ("top", (0.0, 1.0, 0.1), 3.0, (1.6, 1.6), 0.35),
+)
+#: The look scene's floor albedo (mid grey; fixed for the same reason).
+LOOK_FLOOR_ALBEDO = (0.14, 0.14, 0.145)
+
+
 def studio_scene(resolution=(256, 192)) -> dict:
     """The look scene, renderer-neutral (see the module docstring).
 
@@ -161,8 +176,8 @@ def studio_scene(resolution=(256, 192)) -> dict:
         ``camera``: origin, target, ``fov_y_deg``; ``center``, ``radius``, ``resolution``.
     """
     from kesbrdf.render import mesh as _mesh
-    from kesbrdf.render.scenes import FOV_DEG, STUDIO_FLOOR_ALBEDO
-    from kesbrdf.render.studio import KEY_RADIANCE, STUDIO_LIGHTS
+    from kesbrdf.render.scenes import FOV_DEG
+    from kesbrdf.render.studio import KEY_RADIANCE
 
     p, n, uv, f = _mesh.folded_cloth(size=CLOTH_SIZE, n=49)
     floor_y = float(p[:, 1].min())
@@ -179,7 +194,7 @@ def studio_scene(resolution=(256, 192)) -> dict:
     floor = (floor_p, np.tile([0.0, 1.0, 0.0], (4, 1)), np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float),
              np.array([[0, 1, 2], [0, 2, 3]], np.uint32))
     lights = []
-    for _name, direction, dist, (w, h), rel in STUDIO_LIGHTS:
+    for _name, direction, dist, (w, h), rel in LOOK_LIGHTS:
         d = np.asarray(direction, float)
         d /= np.linalg.norm(d)
         origin = center + dist * radius * d
@@ -192,7 +207,7 @@ def studio_scene(resolution=(256, 192)) -> dict:
     return {
         "objects": {"sphere": sphere, "cloth": cloth, "floor": floor},
         "fabric": ("sphere", "cloth"),
-        "floor_albedo": list(STUDIO_FLOOR_ALBEDO),
+        "floor_albedo": list(LOOK_FLOOR_ALBEDO),
         "lights": lights,
         "camera": {"origin": (center + dist * view).tolist(), "target": center.tolist(), "fov_y_deg": fov},
         "center": center.tolist(),

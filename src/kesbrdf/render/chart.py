@@ -51,7 +51,9 @@ def load_chart(model_path, opts, subject: bool = True, meter=None):
     d.update(_s._lights(opts, center, radius))
     d["sensor"] = _s._camera(opts, center, radius, view) if meter is None else _s._meter_camera(opts, center, radius,
                                                                                                  view, *meter)
-    integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
+    # as in scenes.load_scene: the studio's emitters are not seen directly by the camera
+    integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth),
+                                "hide_emitters": opts.light == "studio"}
     if opts.denoise and meter is None:
         integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
     d["integrator"] = integ

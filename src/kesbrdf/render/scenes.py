@@ -569,7 +569,10 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         d.update(_lights(opts, center, radius, key_dir))
         d["sensor"] = (_camera(opts, center, radius, view_dir) if meter is None
                        else _meter_camera(opts, center, radius, view_dir, *meter))
-        integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth)}
+        # the studio's soft boxes and strips light the subject; a photographer keeps them out
+        # of frame, so the camera does not see emitters directly (their reflections stay)
+        integ = opts.integrator or {"type": "path", "max_depth": int(opts.max_depth),
+                                    "hide_emitters": opts.light == "studio"}
         if opts.denoise and meter is None:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
             integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
         d["integrator"] = integ
