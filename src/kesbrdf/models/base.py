@@ -94,6 +94,7 @@ from kesbrdf.models.mappings import evaluate_pairs
 
 __all__ = [
     "ReflectanceModel",
+    "check_fit_options",
     "register",
     "register_fitter",
     "kind_class",
@@ -315,6 +316,16 @@ class ReflectanceModel:
         from kesbrdf.io.model_writer import save_model
 
         return save_model(path, self)
+
+
+def check_fit_options(name: str, accepted, options) -> None:
+    """A one-line :class:`ModelError` naming the options of ``options`` that the fitter
+    ``name`` does not accept (``accepted``: its ``fit_options``).  Every fitter's
+    ``fit_measurement`` calls it; :func:`kesbrdf.fit` checks first and also says which
+    other kinds accept them."""
+    unknown = sorted(set(options) - set(accepted))
+    if unknown:
+        raise ModelError(f"{name} fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(accepted)}")
 
 
 def register(cls: type) -> type:

@@ -81,7 +81,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError, ModelError
-from kesbrdf.models.base import register
+from kesbrdf.models.base import register, check_fit_options
 from kesbrdf.models.fibre_physics import FibrePrior, fit_prior
 from kesbrdf.models.fibre_prior import (ENERGY_BOUND, FibrePriorModel, bound_energy, fit_kes_candidate, fit_residual,
                                         measured_support)
@@ -448,9 +448,7 @@ class FibreCoordModel(FibrePriorModel):
 
     @classmethod
     def fit_measurement(cls, measurement, **options):
-        unknown = sorted(set(options) - set(cls.fit_options))
-        if unknown:
-            raise ModelError(f"fibre-coord fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(cls.fit_options)}")
+        check_fit_options(cls.kind, cls.fit_options, options)
         residual_opt = options.pop("residual", "auto")
         if residual_opt not in ("auto", True, False):
             raise ModelError(f"fibre-coord fit: residual: expected 'auto', True or False, got {residual_opt!r}")

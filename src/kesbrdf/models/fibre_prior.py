@@ -48,7 +48,7 @@ import numpy as np
 
 from kesbrdf.models.mappings import to_phi_gamma
 from kesbrdf.errors import MeasurementError, ModelError
-from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import line_weight
 from kesbrdf.models.table import lookup
@@ -290,9 +290,7 @@ class FibrePriorModel(ReflectanceModel):
 
     @classmethod
     def fit_measurement(cls, measurement, **options):
-        unknown = sorted(set(options) - set(FibrePriorModel.fit_options))
-        if unknown:
-            raise ModelError(f"fibre-prior fit: unknown option(s) {', '.join(unknown)}; expected {', '.join(FibrePriorModel.fit_options)}")
+        check_fit_options(FibrePriorModel.kind, FibrePriorModel.fit_options, options)
         residual_opt = options.pop("residual", "auto")
         m = measurement
         rows, _ = cls.usable_rows(m)

@@ -113,7 +113,7 @@ from typing import ClassVar
 from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
-from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
 from kesbrdf.models.mappings import EXTRAPOLATIONS, HALFDIFF, fade, foreshortening, in_plane_half_diff, to_half_diff
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import (
@@ -274,11 +274,7 @@ class HalfDiffModel(ReflectanceModel):
 
     @classmethod
     def fit_measurement(cls, measurement, **options) -> "HalfDiffModel":
-        unknown = sorted(set(options) - set(cls.fit_options))
-        if unknown:
-            raise KesbrdfError(
-                f"option(s) {', '.join(unknown)} do not apply to kind {KIND!r}; it accepts {', '.join(cls.fit_options)}"
-            )
+        check_fit_options(cls.kind, cls.fit_options, options)
         return fit_halfdiff(measurement, **options)
 
     @classmethod

@@ -50,7 +50,7 @@ import numpy as np
 from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
-from kesbrdf.models.base import ReflectanceModel, register
+from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
 from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
     MAPPINGS,
@@ -316,11 +316,7 @@ class Model(ReflectanceModel):
     # -- fitting (kinds contract) ----------------------------------------------
     @classmethod
     def fit_measurement(cls, measurement, **options) -> "Model":
-        unknown = sorted(set(options) - set(cls.fit_options))
-        if unknown:
-            raise KesbrdfError(
-                f"option(s) {', '.join(unknown)} do not apply to kind 'kes'; it accepts {', '.join(cls.fit_options)}"
-            )
+        check_fit_options(cls.kind, cls.fit_options, options)
         return fit(measurement, **options)
 
     @classmethod

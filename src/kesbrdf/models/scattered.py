@@ -94,7 +94,7 @@ import numpy as np
 
 from kesbrdf.models import interpolation as kes
 from kesbrdf.errors import KesbrdfError, MeasurementError
-from kesbrdf.models.base import register_fitter
+from kesbrdf.models.base import register_fitter, check_fit_options
 from kesbrdf.models.mappings import foreshortening, to_phi_gamma
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import Model, fallback_warning, fill_table, line_weight
@@ -673,12 +673,7 @@ class ScatteredFit:
 
     @classmethod
     def fit_measurement(cls, measurement, **options) -> Model:
-        unknown = sorted(set(options) - set(cls.fit_options))
-        if unknown:
-            raise KesbrdfError(
-                f"option(s) {', '.join(unknown)} do not apply to the scattered fit; it accepts "
-                f"{', '.join(cls.fit_options)}"
-            )
+        check_fit_options("scattered", cls.fit_options, options)
         return fit_scattered(measurement, **options)
 
     @classmethod
