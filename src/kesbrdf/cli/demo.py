@@ -177,42 +177,60 @@ def _simulate_demo_drapes(out: str) -> float:
 SHEET_FRAMES = 40
 
 
-def _compare_in_background(out: str, name: str) -> list:
-    """The reference-vs-model renders of the demo, in a background process.
+def _compare_name(reference) -> str:
+    """The ``kesbrdf compare-render`` reference matching the embedded fabric."""
+    from kesbrdf.references.sadeghi2013 import Sadeghi2013
 
-    Returns one (protocol, numbers without the images, wall s, CPU s) per protocol; the
-    panels are written (atomically) by :func:`~kesbrdf.render.compare.compare_render`.
-    """
+    return "sadeghi-black-satin" if isinstance(reference, Sadeghi2013) else "satin-ward"
+
+
+def _compare_rows(out: str, name: str, say=None) -> list:
+    """The reference-vs-model renders of the demo, one (protocol, numbers without the
+    images, wall s, CPU s) per protocol; the panels are written (atomically) by
+    :func:`~kesbrdf.render.compare.compare_render`.  ``say`` announces each protocol."""
     from kesbrdf.render import compare
 
-    _lower_priority()
     rows = []
     for protocol in compare.PROTOCOLS:
+        if say is not None:
+            say(f"compare: {name} rendered by itself and by its {protocol}-protocol model")
         t0, c0 = time.perf_counter(), time.process_time()
         r = compare.compare_render(name, protocol, "sphere", compare.default_options(),
                                    output=Path(out) / "compare" / f"{name}_{protocol}.png")
         rows.append((protocol, {k: v for k, v in r.items() if not k.startswith("_")},
                      time.perf_counter() - t0, time.process_time() - c0))
+        if say is not None:
+            _print_compare(rows[-1][1])
     return rows
 
 
-class _EarlyCompare:
-    """The reference-vs-model renders, started in a spawned process with the demo.
+def _print_compare(r: dict) -> None:
+    stderr(f"    FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
+           f"(noise floor {r['noise_flip']:.3f}, {r['noise_rel_rmse']:.3f})")
 
-    They fit their own models from the reference (not the demo's fitted model), so they
-    can run while the single-threaded fit, validation and plan keep one core busy; the
-    demo collects them where it used to render them, printing the same lines.
+
+def _compare_in_background(out: str, name: str) -> list:
+    """:func:`_compare_rows` in a background process, at lower priority."""
+    _lower_priority()
+    return _compare_rows(out, name)
+
+
+class _Spawned:
+    """``fn(*args)`` in a spawned process, started with the demo and collected at its step.
+
+    The reference-vs-model renders (they fit their own models from the reference) and the
+    drapes (they need no model) run while the single-threaded fit, validation and plan,
+    and the export looks that wait on Blender and Chromium, leave a core idle.
     """
 
-    def __init__(self, out: Path, name: str):
+    def __init__(self, fn, *args):
         import multiprocessing
         from concurrent.futures import ProcessPoolExecutor
 
-        self.name = name
         self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-        self.future = self.pool.submit(_compare_in_background, str(out), name)
+        self.future = self.pool.submit(fn, *args)
 
-    def result(self) -> list:
+    def result(self):
         try:
             return self.future.result()
         finally:
@@ -266,33 +284,6 @@ class _EarlyBatch:
         return self.result
 
 
-class _EarlyDrapes:
-    """The drapes, simulated in a spawned process from the start of the demo.
-
-    They need no model, and the steps before the renders leave a core idle (the fit is
-    single-threaded, the export looks wait on Blender and Chromium): on two cores the
-    simulation (about 40 s of CPU) then costs no wall time.  The render step waits for it
-    and calls :func:`~kesbrdf.cloth.drape.simulate_drape` again, which finds the finished
-    folders (or resumes them, should the background run have failed).
-    """
-
-    def __init__(self, out: Path):
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
-
-        self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
-        self.future = self.pool.submit(_simulate_demo_drapes, str(out))
-
-    def wait(self) -> tuple[float | None, str | None]:
-        """(CPU s of the background run or None, its error or None)."""
-        try:
-            return self.future.result(), None
-        except Exception as exc:  # resumed in-process by the caller
-            return None, f"{type(exc).__name__}: {exc}"
-        finally:
-            self.pool.shutdown()
-
-
 def _attempt(label: str, fn, notes: list, default=None):
     """Run one consumer of the model; a failure is a one-line note, never a crash.
 
@@ -328,12 +319,11 @@ def run(args) -> int:
     reference = demo_data.embedded_reference()
     early_compare = None
     if not args.quick and _compare_available():
-        from kesbrdf.references.sadeghi2013 import Sadeghi2013
-
-        name = "sadeghi-black-satin" if isinstance(reference, Sadeghi2013) else "satin-ward"
-        early_compare = _EarlyCompare(out, name)
+        early_compare = _Spawned(_compare_in_background, str(out), _compare_name(reference))
     early_batch = _EarlyBatch(out, cluster, args.quick) if batch_wanted else None
-    drapes = _EarlyDrapes(out) if not args.quick and _have("newton") and _have("mitsuba") else None
+    # the drapes in the background: the render step simulates them again, which finds the
+    # finished folders (or resumes them, should the background run have failed)
+    drapes = _Spawned(_simulate_demo_drapes, str(out)) if not args.quick and _have("newton") and _have("mitsuba") else None
 
     # 1. acquire: images -> values when the image-based sample is available
     meas_path = out / "measurement.csv"
@@ -515,7 +505,7 @@ def _compare_available() -> bool:
     return _have("mitsuba") and _have("flip_evaluator") and _have("kesbrdf.render.compare")
 
 
-def _comparisons(out: Path, reference, say, early: _EarlyCompare | None = None) -> list:
+def _comparisons(out: Path, reference, say, early: _Spawned | None = None) -> list:
     """Reference vs model renders of the embedded fabric (paper and dense protocols).
 
     ``early``: the same renders started in a background process with the demo; their
@@ -524,36 +514,26 @@ def _comparisons(out: Path, reference, say, early: _EarlyCompare | None = None) 
     if not _compare_available():
         say("reference-vs-model renders skipped (install kesbrdf[render] and flip-evaluator)")
         return []
-    if early is not None:
-        results = []
-        for protocol, r, wall, cpu in early.result():
-            say(f"compare: {early.name} rendered by itself and by its {protocol}-protocol model")
-            stderr(f"    FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
-                   f"(noise floor {r['noise_flip']:.3f}, {r['noise_rel_rmse']:.3f})")
-            stderr(f"    rendered in a background process since the demo started: {wall:.1f} s wall, "
-                   f"{cpu:.1f} s of CPU")
-            results.append(r)
-        return results
-    from kesbrdf.references.sadeghi2013 import Sadeghi2013
-    from kesbrdf.render import compare
-
-    name = "sadeghi-black-satin" if isinstance(reference, Sadeghi2013) else "satin-ward"
+    name = _compare_name(reference)
+    if early is None:
+        return [r for _, r, _, _ in _compare_rows(str(out), name, say)]
     results = []
-    for protocol in compare.PROTOCOLS:
+    for protocol, r, wall, cpu in early.result():
         say(f"compare: {name} rendered by itself and by its {protocol}-protocol model")
-        r = compare.compare_render(name, protocol, "sphere", compare.default_options(),
-                                   output=out / "compare" / f"{name}_{protocol}.png")
-        stderr(f"    FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
-               f"(noise floor {r['noise_flip']:.3f}, {r['noise_rel_rmse']:.3f})")
-        results.append({k: v for k, v in r.items() if not k.startswith("_")})
+        _print_compare(r)
+        stderr(f"    rendered in a background process since the demo started: {wall:.1f} s wall, "
+               f"{cpu:.1f} s of CPU")
+        results.append(r)
     return results
 
 
-def _renders(out: Path, model_path: Path, say, drapes: _EarlyDrapes | None = None) -> None:
+def _renders(out: Path, model_path: Path, say, drapes: _Spawned | None = None) -> None:
     if drapes is not None:
         say("drape: waiting for the sheet and the skirt, simulated in a background process since the demo started")
-        cpu, error = drapes.wait()
-        stderr(f"    background drapes: {f'{cpu:.1f} s of CPU' if cpu is not None else f'failed ({error}), resumed here'}")
+        try:
+            stderr(f"    background drapes: {drapes.result():.1f} s of CPU")
+        except Exception as exc:  # resumed in-process below
+            stderr(f"    background drapes: failed ({type(exc).__name__}: {exc}), resumed here")
     if not (_have("mitsuba") and _have("kesbrdf.render.scenes")):
         say("renders skipped (install kesbrdf[render])")
         return
