@@ -30,3 +30,20 @@ def import_mitsuba(who: str):
     except ImportError as exc:  # pragma: no cover - depends on the environment
         raise ImportError(f"{who} needs mitsuba and drjit ({exc}); install kesbrdf[render]") from exc
     return mi, dr
+
+
+def load_dict(spec: dict):
+    """``mitsuba.load_dict(spec)`` in one thread and unmerged, so a scene renders the same twice.
+
+    By default Mitsuba loads a dict's children on several threads and merges identical
+    objects through a hash map; both change the order of ``scene.shapes()`` and
+    ``scene.emitters()`` from one load to the next.  Light sampling picks an emitter by that
+    index, so the same scene with the same seed gave a different noise pattern each time it
+    was loaded (the studio's four soft boxes: a colourway test's ratio moved by ±30 % between
+    runs, and a render and its lobe-off twin did not share their random numbers).  With
+    ``parallel=False, optimize=False`` the order is the dict's; the scenes here are a few
+    shapes, so neither option bought anything.
+    """
+    import mitsuba as mi
+
+    return mi.load_dict(spec, parallel=False, optimize=False)

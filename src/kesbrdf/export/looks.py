@@ -65,6 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kesbrdf._drjit import load_dict as _load_dict
 from kesbrdf._atomic import atomic_path, write_text
 from kesbrdf.errors import ExportError, KesbrdfError
 
@@ -268,7 +269,7 @@ def _mitsuba_scene(scene: dict, fabric_bsdf: dict, opts: LookOptions, seed: int,
     if opts.denoise:
         integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
     d["integrator"] = integ
-    return mi.load_dict(d)
+    return _load_dict(d)
 
 
 def _fabric_mask(sc, names) -> np.ndarray:

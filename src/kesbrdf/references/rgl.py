@@ -47,6 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from kesbrdf._drjit import import_mitsuba
+from kesbrdf._drjit import load_dict as _load_dict
 from kesbrdf.errors import FormatError, validate_choice, where
 from kesbrdf.io.tensor_file import read_tensor_file
 from kesbrdf.references.base import ReferenceBRDF
@@ -86,7 +87,7 @@ def load_plugin(spec: dict):
     """``mitsuba.load_dict(spec)`` in variant :data:`VARIANT` (caller's variant restored)."""
     mi, _ = _import_mitsuba()
     with _Variant(mi):
-        return mi.load_dict(spec)
+        return _load_dict(spec)
 
 
 def eval_plugin(bsdf, w_param, w_out) -> np.ndarray:

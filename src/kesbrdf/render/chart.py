@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from kesbrdf._drjit import load_dict as _load_dict
+
 __all__ = ["WHITE_BODY", "CHART_CENTER", "CHART_RADIUS", "SPHERE_X", "load_chart", "render_chart"]
 
 #: Body albedo of the chart's white fabric (a bleached cotton/poly white, linear RGB).
@@ -57,7 +59,7 @@ def load_chart(model_path, opts, subject: bool = True, meter=None):
     if opts.denoise and meter is None:
         integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
     d["integrator"] = integ
-    return mi.load_dict(d)
+    return _load_dict(d)
 
 
 def meter_chart(model_path, opts) -> float:

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from kesbrdf._drjit import load_dict as _load_dict
 from kesbrdf._atomic import atomic_path
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.render import scenes as _scenes
@@ -163,7 +164,7 @@ def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation")
         d = {"type": "kesbrdf", "filename": str(model_path), "mapping": mapping}
         if rgb is not None:
             d["base_color"] = ",".join(f"{float(c):.9g}" for c in rgb)
-        bsdf = mi.load_dict(d)
+        bsdf = _load_dict(d)
         si = dr.zeros(mi.SurfaceInteraction3f, len(wi))
         si.wi = mi.Vector3f(*wr.T)
         f = np.array(bsdf.eval(mi.BSDFContext(), si, mi.Vector3f(*wi.T)), float).T / wi[:, 2:3]

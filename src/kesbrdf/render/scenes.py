@@ -40,6 +40,7 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
+from kesbrdf._drjit import load_dict as _load_dict
 from kesbrdf.errors import FormatError, KesbrdfError, validate_choice, where
 from kesbrdf.io.ply import read_ply, write_ply
 from kesbrdf.render import mesh as _mesh
@@ -203,7 +204,7 @@ def read_drape(path) -> Drape:
 
 
 def _centroid(path) -> np.ndarray:
-    shape = mi.load_dict({"type": "ply", "filename": str(path)})
+    shape = _load_dict({"type": "ply", "filename": str(path)})
     return np.array(mi.traverse(shape)["vertex_positions"]).reshape(-1, 3).mean(axis=0)
 
 
@@ -346,7 +347,7 @@ def _ply_shape(path, bsdf: dict, up_axis: str = "y", turn_deg: float = 0.0) -> "
         d["to_world"] = T().rotate([1, 0, 0], -90) @ spin
     elif turn_deg:
         d["to_world"] = spin
-    return mi.load_dict(d)
+    return _load_dict(d)
 
 
 def _mesh_shape(workdir: Path, name: str, mesh, bsdf: dict) -> "mi.Shape":
@@ -496,7 +497,7 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         workdir = Path(tmp)
         if scene == "sphere":
             T = mi.ScalarTransform4f
-            shapes["cloth"] = mi.load_dict({
+            shapes["cloth"] = _load_dict({
                 "type": "sphere",
                 "to_world": T().translate([0, 1, 0]) @ T().rotate([1, 0, 0], -90),
                 "bsdf": bsdf,
@@ -576,7 +577,7 @@ def load_scene(model_path, scene: str, opts: RenderOptions, drape=None, frame: i
         if opts.denoise and meter is None:  # colour + first-hit albedo and shading normal for OIDN (render_scene)
             integ = {"type": "aov", "aovs": "albedo:albedo,nn:sh_normal", "integrator": integ}
         d["integrator"] = integ
-        return mi.load_dict(d)
+        return _load_dict(d)
 
 
 def garment_framing():
@@ -603,7 +604,7 @@ def _backdrop(center, radius) -> dict:
     params["vertex_positions"] = v
     params["faces"] = mi.UInt32(faces.astype(np.uint32).ravel())
     params.update()
-    mesh.set_bsdf(mi.load_dict(_diffuse(STUDIO_FLOOR_ALBEDO)))
+    mesh.set_bsdf(_load_dict(_diffuse(STUDIO_FLOOR_ALBEDO)))
     return mesh
 
 
