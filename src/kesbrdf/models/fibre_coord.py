@@ -82,6 +82,7 @@ from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError, ModelError
 from kesbrdf.models.base import register, check_fit_options
+from kesbrdf.models.body import log_body_upper
 from kesbrdf.models.fibre_physics import FibrePrior, fit_prior
 from kesbrdf.models.fibre_prior import (ENERGY_BOUND, FibrePriorModel, bound_energy, fit_kes_candidate, fit_residual,
                                         measured_support)
@@ -410,8 +411,10 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
             fun(theta)
         return cache["rj"][1]
 
-    lim = np.full(P_, CORRECTION_MAX)
-    res = least_squares(fun, np.zeros(P_), jac=jac, bounds=(-lim, lim), method="trf", max_nfev=max_nfev,
+    lo, hi = np.full(P_, -CORRECTION_MAX), np.full(P_, CORRECTION_MAX)
+    # the body k_d·e^{δ₀} stays within eq. (B1) of kesbrdf.models.body (at most the darkest reading)
+    hi[sl["kd"]] = np.clip(log_body_upper(y) - np.log(basis.kd), 1e-9, CORRECTION_MAX)
+    res = least_squares(fun, np.zeros(P_), jac=jac, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
                         ftol=1e-6, xtol=1e-8)
     theta = res.x
     r, Jf = residual_and_jacobian(theta)

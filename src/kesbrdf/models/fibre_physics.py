@@ -63,6 +63,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError
+from kesbrdf.models.body import log_body_upper
 from kesbrdf.models.mappings import evaluate_pairs
 from kesbrdf.optics import fresnel_dielectric
 
@@ -645,7 +646,7 @@ def _start(spec: PriorSpec, d: _Data, u_half, rho, psi=(0.0, 0.0), offset=0.0, g
     ymin = np.maximum(np.percentile(np.maximum(d.y, 0), 5, axis=0), d.eps)
     yrng = np.maximum(np.max(d.y, axis=0) - ymin, d.eps)
     for c in range(spec.n_channels):
-        x[idx[f"log_kd_{c}"]] = math.log(0.8 * ymin[c])
+        x[idx[f"log_kd_{c}"]] = math.log(0.8 * ymin[c])  # clipped to eq. (B1) by the bounds
         for fam in ("warp", "weft"):
             x[idx[f"{fam}_log_ks_{c}"]] = math.log(yrng[c])
     for j, fam in enumerate(("warp", "weft")):
@@ -677,6 +678,18 @@ def _scale_ks_start(spec, x, d):
         for fam in ("warp", "weft"):
             x[idx[f"{fam}_log_ks_{c}"]] += math.log(max(scale[c], 1e-300))
     return x
+
+
+def body_bounded(spec: PriorSpec, bounds, y):
+    """``bounds`` with the upper bound of every ln k_d lowered to ln c_max of the data ``y``
+    (eq. B1 of :mod:`kesbrdf.models.body`: the lobe is non-negative, so the body is at most
+    the darkest reading)."""
+    lo, hi = (np.array(b, float) for b in bounds)
+    idx = spec.index()
+    cols = [idx[f"log_kd_{c}"] for c in range(spec.n_channels)]
+    hi[cols] = np.minimum(hi[cols], log_body_upper(y))
+    lo[cols] = np.minimum(lo[cols], hi[cols] - 1e-6)
+    return lo, hi
 
 
 def _subsample(d: _Data, n_max: int, seed: int = 0) -> _Data:
@@ -744,7 +757,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
             else:
                 x0 = _start(spec, ds, uh, rho, psi, off)
             x0 = _scale_ks_start(spec, x0, ds)
-            bounds = spec.bounds(tuple(np.sign(p) if p else 1 for p in psi))
+            bounds = body_bounded(spec, spec.bounds(tuple(np.sign(p) if p else 1 for p in psi)), d.y)
             res = _solve(spec, x0, ds, bounds, n_start)
             if best is None or res.cost < best[0].cost:
                 best = (res, bounds)
