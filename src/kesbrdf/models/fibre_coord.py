@@ -412,8 +412,9 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
         return cache["rj"][1]
 
     lo, hi = np.full(P_, -CORRECTION_MAX), np.full(P_, CORRECTION_MAX)
-    # the body k_d·e^{δ₀} stays within eq. (B1) of kesbrdf.models.body (at most the darkest reading)
-    hi[sl["kd"]] = np.clip(log_body_upper(y) - np.log(basis.kd), 1e-9, CORRECTION_MAX)
+    # the body k_d·e^{δ₀} stays within eq. (B2) of kesbrdf.models.body (at most the darkest reading + 2σ)
+    reading_sd = sig * (np.maximum(y, 0) + eps) if m.uncertainty is not None else None
+    hi[sl["kd"]] = np.clip(log_body_upper(y, reading_sd) - np.log(basis.kd), 1e-9, CORRECTION_MAX)
     res = least_squares(fun, np.zeros(P_), jac=jac, bounds=(lo, hi), method="trf", max_nfev=max_nfev,
                         ftol=1e-6, xtol=1e-8)
     theta = res.x

@@ -680,14 +680,20 @@ def _scale_ks_start(spec, x, d):
     return x
 
 
-def body_bounded(spec: PriorSpec, bounds, y):
-    """``bounds`` with the upper bound of every ln k_d lowered to ln c_max of the data ``y``
-    (eq. B1 of :mod:`kesbrdf.models.body`: the lobe is non-negative, so the body is at most
-    the darkest reading)."""
+def reading_sigma(d: _Data):
+    """The readings' standard deviations (N, C) of ``d`` (from the measurement's
+    uncertainty, as the log residual's σ carries it), or None without uncertainties."""
+    return d.sigma * (np.maximum(d.y, 0) + d.eps) if d.has_sigma else None
+
+
+def body_bounded(spec: PriorSpec, bounds, d: _Data):
+    """``bounds`` with the upper bound of every ln k_d lowered to ln c_max of the data
+    (eq. B2 of :mod:`kesbrdf.models.body`: the lobe is non-negative, so the body is at most
+    the darkest reading, up to its noise)."""
     lo, hi = (np.array(b, float) for b in bounds)
     idx = spec.index()
     cols = [idx[f"log_kd_{c}"] for c in range(spec.n_channels)]
-    hi[cols] = np.minimum(hi[cols], log_body_upper(y))
+    hi[cols] = np.minimum(hi[cols], log_body_upper(d.y, reading_sigma(d)))
     lo[cols] = np.minimum(lo[cols], hi[cols] - 1e-6)
     return lo, hi
 
@@ -757,7 +763,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
             else:
                 x0 = _start(spec, ds, uh, rho, psi, off)
             x0 = _scale_ks_start(spec, x0, ds)
-            bounds = body_bounded(spec, spec.bounds(tuple(np.sign(p) if p else 1 for p in psi)), d.y)
+            bounds = body_bounded(spec, spec.bounds(tuple(np.sign(p) if p else 1 for p in psi)), d)
             res = _solve(spec, x0, ds, bounds, n_start)
             if best is None or res.cost < best[0].cost:
                 best = (res, bounds)
