@@ -706,7 +706,8 @@ def _subsample(d: _Data, n_max: int, seed: int = 0) -> _Data:
     return _Data(d.wi[pick], d.wr[pick], d.y[pick], d.eps, d.sigma[pick], d.has_sigma)
 
 
-def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None, max_nfev: int = 200) -> FibrePrior:
+def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None, max_nfev: int = 200,
+              bound_body: bool = False) -> FibrePrior:
     """Fit the prior to a :class:`~kesbrdf.measure.measurement.Measurement` (module docstring).
 
     Parameters
@@ -722,6 +723,12 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
         the θ_d = 45° slice (never in the paper protocol, where ωi·ωr = 0).
     rows : bool array, optional
         Rows to use.
+    bound_body : bool
+        Hold k_d within eq. (B2) of :mod:`kesbrdf.models.body` (at most the darkest
+        reading + 2σ); ``fibre-coord`` fits its bounded candidate with it.  The
+        ``fibre-prior`` kind fits k_d free: its parametric lobe cannot carry an in-plane
+        floor, and bounded it predicted the leave-one-family-out hemispheres worse
+        (docs/decisions.md, "The body term").
 
     Returns
     -------
@@ -763,7 +770,9 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
             else:
                 x0 = _start(spec, ds, uh, rho, psi, off)
             x0 = _scale_ks_start(spec, x0, ds)
-            bounds = body_bounded(spec, spec.bounds(tuple(np.sign(p) if p else 1 for p in psi)), d)
+            bounds = spec.bounds(tuple(np.sign(p) if p else 1 for p in psi))
+            if bound_body:
+                bounds = body_bounded(spec, bounds, d)
             res = _solve(spec, x0, ds, bounds, n_start)
             if best is None or res.cost < best[0].cost:
                 best = (res, bounds)
@@ -784,6 +793,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     report["seconds"] = time.perf_counter() - t0
     report["free_axes"] = bool(free_axes)
     report["free_theta_d"] = bool(free_theta_d)
+    report["body_bounded"] = bool(bound_body)
     return FibrePrior(spec, np.asarray(x, float), report, cov)
 
 
