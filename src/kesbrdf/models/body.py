@@ -16,21 +16,25 @@ is held to
 
 .. math:: c \le \max\bigl(0, \min_n (y_n + z\,\sigma_n)\bigr), \qquad z = 2     \qquad (B2)
 
-with σ_n the reading's standard deviation (the measurement's uncertainty; the scattered
-fit, whose data rarely carry one, reads it from its own first-pass residuals).  The rule:
+with σ_n the reading's standard deviation (the measurement's uncertainty).  The rule:
 
 * ``kes``, ``kes-halfdiff`` and the tabulated view of any kind (``body="auto"``) take
-  c = c_max (:func:`body_value`): the lobe carries everything above the darkest reading;
-* the parametric fits (``fibre-prior``, and through it ``fibre-coord``) fit k_d jointly
-  with the lobe but bounded by (B2) (:func:`log_body_upper`).  Before, a log-space fit
-  let k_d fill the dark tails the parametric lobe cannot reach: on the dense measurement
-  of the Sadeghi black satin k_d was 0.039 1/sr against a darkest reading of 0.006 (a
-  floor 6× what any sample allows, and 1.6× the reference's median over all pairs),
-  which rendered the black satin grey (docs/decisions.md, "The body term is bounded
-  by the darkest reading").
-* the scattered fit bounds its fitted c by (B2) the same way.
+  c = c_max of (B1) (:func:`body_value`): the lobe carries everything above the darkest
+  reading;
+* ``fibre-coord``: when the free base prior's k_d exceeds (B2), the prior is fitted again
+  with k_d held within it (:func:`log_body_upper`,
+  ``kesbrdf.models.fibre_physics.fit_prior(bound_body=True)``), the corrections are
+  fitted on both, and the bounded candidate is kept when it reproduces the readings
+  clearly better (``kesbrdf.models.fibre_coord.BODY_KEEP_RATIO``).  On the dense Sadeghi
+  black satin the free k_d was 0.039 1/sr against a darkest reading of 0.006 and the
+  reference's own body of 0.0054: a floor that rendered the black satin grey and that
+  the corrections could not take back;
+* ``fibre-prior`` and the scattered fit fit c jointly with their lobe, free.  The darkest
+  reading is usually at grazing view or light, where a real fabric's volume scattering
+  falls below a Lambertian's, and their lobes cannot carry a floor: held to (B2) they
+  predicted held-out data worse (docs/decisions.md, "The body term").
 
-Noise moves the darkest reading down by about its σ, so c_max slightly underestimates a
+Noise moves the darkest reading down by about its σ, so (B1) slightly underestimates a
 true Lambertian floor; that only moves energy to the lobe (which then reproduces the
 samples).  A reading at or below 0 (a noise floor) gives c_max = 0.
 """

@@ -95,7 +95,6 @@ import numpy as np
 from kesbrdf.models import interpolation as kes
 from kesbrdf.errors import KesbrdfError, MeasurementError
 from kesbrdf.models.base import register_fitter, check_fit_options
-from kesbrdf.models.body import body_bound
 from kesbrdf.models.mappings import foreshortening, to_phi_gamma
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import Model, fallback_warning, fill_table, line_weight
@@ -242,8 +241,6 @@ class _Problem:
         self.body_fixed = body_fixed  # None: fitted (log c is the last parameter)
         self.eps = LOG_EPS_REL * max(float(np.max(np.abs(f))), np.finfo(float).tiny)
         self.log_t = np.log(np.maximum(f, 0.0) + self.eps)
-        #: upper bound of the fitted body (eq. B2 of kesbrdf.models.body), set by fit_scattered
-        self.c_max = math.inf
         self.loss_scale = loss_scale
         # γ side of the bilinear lookup (kesbrdf.models.brdf.lookup), fixed for the data
         n_gamma = gamma_grid.size
@@ -299,9 +296,8 @@ class _Problem:
     def unpack(self, x):
         n = self.gamma_nodes.size
         theta = np.clip(x[: n * self.n_free].reshape(n, self.n_free), -THETA_CLIP, THETA_CLIP) @ self.S
-        if self.body_fixed is not None:
-            return theta, self.body_fixed
-        return theta, min(math.exp(min(max(x[-1], -THETA_CLIP), THETA_CLIP)), self.c_max)
+        c = math.exp(min(max(x[-1], -THETA_CLIP), THETA_CLIP)) if self.body_fixed is None else self.body_fixed
+        return theta, c
 
     def table_columns(self, theta, c, columns):
         """Lobe table at γ-grid rows ``columns`` (as kesbrdf.models.kes.fit), (|cols|, n_phi), and extras."""
@@ -357,8 +353,7 @@ class _Problem:
         Jfree = (Jt @ self.S.T).reshape(f.size, -1) * scale[:, None]
         Jreg = self.reg @ np.kron(np.eye(n_nodes), self.S.T)
         if self.body_fixed is None:
-            free_c = float(x[-1] < math.log(max(self.c_max, 1e-300)))  # c = c_max (eq. B2) is flat in x
-            Jfree = np.hstack([Jfree, (dfdc * c * scale * free_c)[:, None]])
+            Jfree = np.hstack([Jfree, (dfdc * c * scale)[:, None]])
             Jreg = np.hstack([Jreg, np.zeros((Jreg.shape[0], 1))])
         return np.vstack([Jfree, Jreg])
 
@@ -379,7 +374,7 @@ def _initial(problem: _Problem, f, body_fixed):
     theta0 = np.full((n, problem.n_free), math.log(0.3 * med))
     x0 = theta0.ravel()
     if body_fixed is None:
-        c0 = max(min(float(np.quantile(np.maximum(f, 0.0), 0.1)), problem.c_max) * 0.5, problem.eps)
+        c0 = max(float(np.quantile(np.maximum(f, 0.0), 0.1)) * 0.5, problem.eps)
         x0 = np.append(x0, math.log(c0))
     return x0
 
@@ -514,29 +509,14 @@ def fit_scattered(
         if not (body_fixed >= 0 and math.isfinite(body_fixed)):
             raise KesbrdfError(f"expected a non-negative body term, got {body!r}")
 
-    def problem(f, sym, sigma=None):
-        p = _Problem(phi_s, gamma, norm, f, gamma_nodes, gamma_grid, sym, body_fixed,
-                     smooth_gamma, smooth_phi, loss_scale)
-        if sigma is not None:  # the fitted body's bound, eq. (B2) of kesbrdf.models.body
-            p.c_max = float(body_bound(f, sigma)[0])
-        return p
+    def problem(f, sym):
+        return _Problem(phi_s, gamma, norm, f, gamma_nodes, gamma_grid, sym, body_fixed,
+                        smooth_gamma, smooth_phi, loss_scale)
 
     # 1. warp search on the channel mean (an isotropic start, offset-independent)
     f_mean = values.mean(axis=1)
     iso = problem(f_mean, "isotropic")
     x_iso = iso.solve(_initial(iso, f_mean, body_fixed), max_nfev).x
-    # the readings' σ for the body bound: the measurement's, else the spread of the
-    # isotropic first pass's log residuals (1.4826 MAD) times the reading
-    if m.uncertainty is not None:
-        sigma = np.abs(np.asarray(m.uncertainty, float)[usable])
-    else:
-        r_iso = np.log(iso.predict(*iso.unpack(x_iso))[0] + iso.eps) - iso.log_t
-        sigma = 1.4826 * float(np.median(np.abs(r_iso - np.median(r_iso)))) * np.abs(values)
-    sigma_mean = sigma.mean(axis=1)
-    if body_fixed is None:
-        iso = problem(f_mean, "isotropic", sigma_mean)
-        x_iso = iso.solve(x_iso if x_iso[-1] < math.log(max(iso.c_max, 1e-300))
-                          else _initial(iso, f_mean, body_fixed), max_nfev).x
     search = {}
     x_search = None
     if symmetry == "isotropic":
@@ -547,7 +527,7 @@ def fit_scattered(
         search["fixed"] = True
     else:
         minimize_scalar = _scipy_optimize().minimize_scalar
-        p = problem(f_mean, symmetry, sigma_mean)
+        p = problem(f_mean, symmetry)
         x_start = _broadcast_free(x_iso, p, body_fixed)
         cache = {}
 
@@ -577,13 +557,12 @@ def fit_scattered(
     C = m.n_channels
     thetas, bodies, costs, nfev, train_log_rmse = [], [], [], [], []
     for ch in range(C):
-        p = problem(values[:, ch], symmetry, sigma[:, ch])
+        p = problem(values[:, ch], symmetry)
         p.set_offset(delta)
         if C == 1 and x_search is not None:
             x0 = x_search  # the search already fitted this channel at this warp
         else:
-            x0 = _broadcast_free(x_iso if C == 1 else _fit_isotropic(problem, values[:, ch], body_fixed, max_nfev,
-                                                                     sigma[:, ch]),
+            x0 = _broadcast_free(x_iso if C == 1 else _fit_isotropic(problem, values[:, ch], body_fixed, max_nfev),
                                  p, body_fixed)
         res = p.solve(x0, max_nfev)
         theta, c = p.unpack(res.x)
@@ -725,9 +704,9 @@ class ScatteredFit:
         return mask, "; ".join(parts)
 
 
-def _fit_isotropic(problem, f, body_fixed, max_nfev, sigma=None):
+def _fit_isotropic(problem, f, body_fixed, max_nfev):
     """Isotropic start for one channel (used when C > 1)."""
-    iso = problem(f, "isotropic", sigma)
+    iso = problem(f, "isotropic")
     return iso.solve(_initial(iso, f, body_fixed), max_nfev).x
 
 
