@@ -13,7 +13,11 @@ The CLI (``kesbrdf fit``), the viewer's upload and the demo all call :func:`fit`
   squares, with its sample-frame warp recorded).
 
 When no candidate uses every row, the one that uses the most wins (the earlier on a
-tie).  The library never prints: the choice, the reason, the rows used and the rows
+tie).  The subset rule (:func:`choose_fitter`, docs/models.md "More rows never predict
+worse"): a candidate whose ``sparse_rows`` says the rows it would add are too sparse for
+it (a few incidence angles beside the paper's line, a few out-of-plane samples) is passed
+over for the candidate that fits the rest, so extra samples never make the fit worse
+than the fit to the subset.  The library never prints: the choice, the reason, the rows used and the rows
 not used (how many, and why) come back in a :class:`FitReport`, together with the
 model's one-line warnings (e.g. the log fallback where K(φ) ≤ 0).
 

@@ -178,7 +178,8 @@ def simulate(truth, groups, noise: float = 0.0, rng=None) -> Measurement:
 
 
 def default_fit(m: Measurement):
-    """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row.
+    """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row it can use well
+    (the subset rule of :func:`kesbrdf.fitting.choose_fitter`).
 
     Without the held-out comparison with the prior (``compare=False``): the planner fits
     every candidate protocol many times, and a comparison costs four prior fits (the
