@@ -40,10 +40,11 @@ def run() -> dict:
         for protocol in compare.PROTOCOLS:
             t0 = time.perf_counter()
             r = compare.compare_render(name, protocol, "sphere", compare.default_options(),
-                                       models=("kes", "fibre-prior", "prior-only"))
-            prior, pure = r["models"]["fibre-prior"], r["models"]["prior-only"]
+                                       models=("default", "kes", "fibre-prior", "prior-only"))
+            prior, pure, kes = r["models"]["fibre-prior"], r["models"]["prior-only"], r["models"]["kes"]
             out[f"{name}/{protocol}"] = {
                 "flip": r["flip"], "rel_rmse": r["rel_rmse"],
+                "kes_flip": kes["flip"], "kes_rel_rmse": kes["rel_rmse"],
                 "prior_flip": prior["flip"], "prior_rel_rmse": prior["rel_rmse"],
                 "prior_only_flip": pure["flip"], "prior_only_rel_rmse": pure["rel_rmse"],
                 "noise_flip": r["noise_flip"], "noise_rel_rmse": r["noise_rel_rmse"],
@@ -52,7 +53,7 @@ def run() -> dict:
             }
     for name in ("sadeghi-satin", "sadeghi-black-satin"):
         r = compare.compare_render(name, "paper", "sphere", compare.default_options(extrapolation="hold"),
-                                   noise_floor=False)
+                                   noise_floor=False, models=("kes",))
         out[f"{name}/paper/extrapolation=hold"] = {"flip": r["flip"], "rel_rmse": r["rel_rmse"]}
     return out
 

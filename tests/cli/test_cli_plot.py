@@ -41,7 +41,7 @@ def test_plot_all_into_a_folder_as_svg(files, tmp_path):
                "--format", "svg", "-o", str(tmp_path / "figs")])
     assert rc == 0
     names = sorted(p.name for p in (tmp_path / "figs").iterdir())
-    assert names == ["fig3a.svg", "fig3b.svg", "fig4.svg", "fig5.svg", "fig6.svg"]
+    assert names == ["fig3a.svg", "fig3b.svg", "fig4.svg", "fig5.svg", "fig6.svg", "figalbedo.svg"]
     assert all((tmp_path / "figs" / n).read_text().lstrip().startswith("<?xml") for n in names)
 
 

@@ -42,7 +42,7 @@ def test_compare_render_writes_panel_and_numbers(render_module, tmp_path):
     from kesbrdf.render.compare import compare_render
 
     out = tmp_path / "cmp.png"
-    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=out)
+    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=out, models=("kes",))
     panel = Image.open(out)
     assert panel.size[0] == 3 * RES[0] and panel.size[1] > RES[1]
     meta = json.loads((tmp_path / "cmp.json").read_text())
@@ -61,8 +61,8 @@ def test_dense_protocol_model_is_closer_than_paper_on_ward(render_module):
     """
     from kesbrdf.render.compare import compare_render
 
-    paper = compare_render("satin-ward", "paper", "sphere", _opts(), noise_floor=False)
-    dense = compare_render("satin-ward", "dense", "sphere", _opts(), noise_floor=False)
+    paper = compare_render("satin-ward", "paper", "sphere", _opts(), noise_floor=False, models=("kes",))
+    dense = compare_render("satin-ward", "dense", "sphere", _opts(), noise_floor=False, models=("kes",))
     assert dense["model_kind"] == "kes-halfdiff"
     assert dense["rel_rmse"] < 0.8 * paper["rel_rmse"], (dense["rel_rmse"], paper["rel_rmse"])
 
@@ -118,7 +118,8 @@ def test_report_embeds_the_panels(render_module, tmp_path):
     from kesbrdf.plotting.report import ReportInputs, build_report
     from kesbrdf.render.compare import compare_render
 
-    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=tmp_path / "p.png", noise_floor=False)
+    r = compare_render("satin-ward", "paper", "sphere", _opts(), output=tmp_path / "p.png", noise_floor=False,
+                       models=("kes",))
     text = build_report(ReportInputs(figures=(), comparisons=[r, {"panel": str(tmp_path / "missing.png"), "flip": 0, "rel_rmse": 0}]))
     assert "Reference vs model renders" in text
     assert text.count('<figure class="compare">') == 1  # the missing panel is skipped
@@ -202,14 +203,52 @@ def test_reference_renders_are_rendered_once_for_both_protocols(render_module, m
     calls = []
     real = scenes.render_scene
     monkeypatch.setattr(scenes, "render_scene", lambda s, o: calls.append(o.seed) or real(s, o))
-    paper = compare_render("satin-ward", "paper", "sphere", _opts())
+    paper = compare_render("satin-ward", "paper", "sphere", _opts(), models=("kes",))
     assert len(calls) == 3  # reference, model, noise floor
-    dense = compare_render("satin-ward", "dense", "sphere", _opts())
+    dense = compare_render("satin-ward", "dense", "sphere", _opts(), models=("kes",))
     assert len(calls) == 4  # the dense model alone
     assert dense["noise_flip"] == paper["noise_flip"]
     compare._REFERENCE_RENDERS.clear()
-    fresh = compare_render("satin-ward", "dense", "sphere", _opts())
+    fresh = compare_render("satin-ward", "dense", "sphere", _opts(), models=("kes",))
     assert len(calls) == 7
     assert fresh["noise_flip"] == pytest.approx(dense["noise_flip"], abs=1e-3)
     assert fresh["flip"] == pytest.approx(dense["flip"], abs=1e-3)
     assert fresh["rel_rmse"] == pytest.approx(dense["rel_rmse"], abs=1e-3)
+
+
+def test_compare_render_fits_by_kesbrdf_fits_rule_unless_a_kind_is_given(monkeypatch, tmp_path):
+    """Issue 20: ``kesbrdf compare-render`` fits as ``kesbrdf fit`` does (``kind="auto"``)
+    unless ``--kind`` names one; the spec reaching the pipeline's fit step is recorded
+    (the fit itself is a quick KES fit, and the renders are stubbed: this is the routing)."""
+    import kesbrdf.pipeline as pipeline
+    from kesbrdf.cli.main import main
+    from kesbrdf.render import compare
+
+    real_fit = pipeline.fit
+    seen = []
+
+    def recording_fit(m, spec=None):
+        seen.append(spec)
+        return real_fit(m, pipeline.FitSpec("kes", {"fallback": "log"}))
+
+    def no_render(reference, protocol, scene, opts, output=None, params=None, noise_floor=True, models=("default",)):
+        ref = compare.make_reference(reference)
+        from kesbrdf.measure.gonio import measure
+
+        m = measure(ref, protocol=protocol)
+        return {mo: compare.fit_reference_model(ref, protocol, mo, m)[0].kind for mo in models}
+
+    monkeypatch.setattr(pipeline, "fit", recording_fit)
+    assert compare.fit_spec("paper") == pipeline.FitSpec("auto")
+    assert no_render("satin-ward", "paper", "sphere", None) == {"default": "kes"}
+    assert seen[-1].kind == "auto" and seen[-1].compare  # the rule, with the prior comparison
+    no_render("satin-ward", "paper", "sphere", None, models=("kes-halfdiff",))
+    assert seen[-1].kind == "kes-halfdiff"
+    # the CLI: no --kind is the rule, --kind names the fitter
+    calls = []
+    monkeypatch.setattr(compare, "compare_render", lambda *a, **kw: calls.append(kw["models"]) or {
+        "models": {}, "noise_flip": 0.0, "noise_rel_rmse": 0.0, "panel": "p", "json": "j"})
+    out = str(tmp_path / "c.png")
+    assert main(["compare-render", "--reference", "satin-ward", "-o", out]) == 0
+    assert main(["compare-render", "--reference", "satin-ward", "--kind", "fibre-coord", "--with-prior", "-o", out]) == 0
+    assert calls == [("default",), ("fibre-coord", "fibre-prior")]

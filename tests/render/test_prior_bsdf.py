@@ -177,7 +177,7 @@ def test_chi2_prior_sampling(render_module, prior_files, name, theta):
 
 
 def test_compare_render_cli_scores_kes_and_prior(render_module, tmp_path):
-    """``kesbrdf compare-render --with-prior``: both models of one measurement, one panel."""
+    """``kesbrdf compare-render --kind kes --with-prior``: both models of one measurement, one panel."""
     import json
 
     from PIL import Image
@@ -185,7 +185,7 @@ def test_compare_render_cli_scores_kes_and_prior(render_module, tmp_path):
     from kesbrdf.cli.main import main
 
     out = tmp_path / "cmp.png"
-    assert main(["compare-render", "--reference", "satin-ward", "--with-prior", "--spp", "4",
+    assert main(["compare-render", "--reference", "satin-ward", "--kind", "kes", "--with-prior", "--spp", "4",
                  "--resolution", "48x36", "-o", str(out)]) == 0
     meta = json.loads(out.with_suffix(".json").read_text())
     assert {k: v["kind"] for k, v in meta["models"].items()} == {"kes": "kes", "fibre-prior": "fibre-prior"}

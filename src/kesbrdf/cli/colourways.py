@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from kesbrdf.cli._common import check_output, stderr
-from kesbrdf.cli.render import add_render_options, render_options
+from kesbrdf.cli.render import add_render_options, metered, render_options
 
 HELP = "Render a contact sheet of one garment in >= 6 colourways (same gloss and anisotropy, new body colour)."
 
@@ -31,7 +31,7 @@ def run(args) -> int:
 
     from kesbrdf.render import colourways
 
-    opts = render_options(args)
+    opts = metered(args, render_options(args), args.model, args.scene, drape=args.drape)
     cw = colourways.parse_colourways(args.colours) if args.colours else None
     with Progress(TextColumn("rendering colourways"), BarColumn(), MofNCompleteColumn(), transient=True) as bar:
         task = bar.add_task("tiles", total=None)

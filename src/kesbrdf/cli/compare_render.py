@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from kesbrdf.cli._common import check_output, stderr
 
-HELP = "Render a reference BRDF and the KES model fitted from its virtual measurements side by side, with a FLIP map."
+HELP = ("Render a reference BRDF and the model fitted from its virtual measurements (by kesbrdf fit's rule, or "
+        "--kind) side by side, with a FLIP map.")
 
 
 def add_arguments(p):
@@ -13,15 +14,19 @@ def add_arguments(p):
     p.add_argument("--reference", required=True, metavar="NAME",
                    help="reference BRDF (ward, satin-ward, ashikhmin-shirley, sadeghi-<preset>, "
                         "sadeghi-black-satin, rgl-felt-white, ...)")
+    from kesbrdf.models.base import known_fitters
+
     p.add_argument("--protocol", choices=("paper", "dense"), default="paper",
-                   help="paper: 116 samples, kind kes; dense: 6-degree in-plane grid, kind kes-halfdiff")
+                   help="paper: the paper's 116 in-plane samples; dense: a 6-degree in-plane grid (900)")
+    p.add_argument("--kind", choices=("auto",) + known_fitters(), default="auto",
+                   help="model kind to fit (default auto: the rule of 'kesbrdf fit', docs/models.md)")
     p.add_argument("--scene", choices=("sphere", "swatch", "drape", "dressform"), default="sphere")
     p.add_argument("--params", default=None, help="JSON object overriding the reference's parameters")
     p.add_argument("--base-color", default=None, metavar="R,G,B",
                    help="render both with this body albedo (default: each one's own body)")
     p.add_argument("--with-prior", action="store_true",
                    help="also fit the fibre prior x residual (kind fibre-prior) to the same measurement and "
-                        "render it next to the KES model")
+                        "render it next to the model")
     p.add_argument("-o", "--output", required=True, help="panel PNG (the numbers go to <stem>.json)")
     add_render_options(p, spp=64, resolution="480x360")
     # one small light in a dark room shows the lobe's shape; 480x360 at 64 spp + OIDN keeps
@@ -39,7 +44,8 @@ def run(args) -> int:
     check_output(args.output, (".png",))
     stderr(f"comparing {args.reference} ({args.protocol} protocol) on the {args.scene}, "
            f"{opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
-    models = ("kes", "fibre-prior") if args.with_prior else ("kes",)
+    first = "default" if args.kind == "auto" else args.kind
+    models = (first,) + (("fibre-prior",) if args.with_prior and first != "fibre-prior" else ())
     r = compare.compare_render(args.reference, args.protocol, args.scene, opts, output=args.output, params=args.params,
                                models=models)
     for name, m in r["models"].items():

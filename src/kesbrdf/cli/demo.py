@@ -205,7 +205,7 @@ def _compare_rows(out: str, name: str, say=None) -> list:
 
 
 def _print_compare(r: dict) -> None:
-    stderr(f"    FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
+    stderr(f"    {r['model_kind']}: FLIP {r['flip']:.3f}, relative RMSE {r['rel_rmse']:.3f} "
            f"(noise floor {r['noise_flip']:.3f}, {r['noise_rel_rmse']:.3f})")
 
 

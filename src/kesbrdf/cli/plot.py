@@ -37,7 +37,7 @@ def _outputs(args) -> list[tuple[str, Path]]:
     from kesbrdf.plotting.save import FORMATS
 
     out = Path(args.output)
-    names = ["3a", "3b", "4", "5", "6"] if args.figure == "all" else [args.figure]
+    names = [f for f in FIGURE_CHOICES if f != "all"] if args.figure == "all" else [args.figure]
     suffix = out.suffix.lower().lstrip(".")
     if suffix and not out.is_dir():
         if suffix not in FORMATS:

@@ -37,6 +37,23 @@ def parse_rgb_flag(text: str | None, flag: str):
     return rgb
 
 
+#: ``--exposure card``: meter the scene once on an 18 % grey card (docs/rendering.md, "Studio").
+CARD = "card"
+
+
+def parse_exposure(text: str):
+    """``--exposure``: stops (a finite number) or ``card``."""
+    if text.strip().lower() == CARD:
+        return CARD
+    try:
+        stops = float(text)
+    except ValueError:
+        stops = math.nan
+    if not math.isfinite(stops):
+        raise KesbrdfError(f"--exposure: expected stops (a number such as -1.5) or 'card', got {text!r}")
+    return stops
+
+
 def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
     """Flags shared by ``render`` and ``colourways``."""
     p.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
@@ -54,7 +71,9 @@ def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
     p.add_argument("--mapping", choices=("deviation", "halfvector"), default="deviation",
                    help="(phi, gamma) mapping (docs/formats.md); 'paper' is not renderable")
     p.add_argument("--one-sided", action="store_true", help="shade back faces black (default: two-sided cloth)")
-    p.add_argument("--exposure", type=float, default=0.0, help="exposure in stops for PNG/JPEG output")
+    p.add_argument("--exposure", default="0", metavar="STOPS|card",
+                   help="exposure of PNG/JPEG output: stops (default 0), or 'card': metered once on an 18%% grey "
+                        "card in the scene's light, the same for every image of the scene (docs/rendering.md)")
     p.add_argument("--extrapolation", choices=("fade", "hold"), default="fade",
                    help="lobe beyond the last measured deviation: fade to the body (default) or hold (docs/formats.md)")
     p.add_argument("--max-depth", type=int, default=4, help="path length (default 4)")
@@ -62,8 +81,10 @@ def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
 
 
 def render_options(args, **extra):
+    """The render flags as RenderOptions; ``--exposure card`` gives 0 here (see :func:`metered`)."""
     from kesbrdf.render.scenes import RenderOptions
 
+    stops = parse_exposure(str(args.exposure))
     return RenderOptions(
         spp=args.spp,
         resolution=parse_resolution(args.resolution),
@@ -74,12 +95,25 @@ def render_options(args, **extra):
         two_sided=not args.one_sided,
         max_depth=args.max_depth,
         seed=args.seed,
-        exposure=args.exposure,
+        exposure=0.0 if stops == CARD else stops,
         extrapolation=args.extrapolation,
         tonemap=args.tonemap,
         denoise=args.denoise,
         **extra,
     ).validate()
+
+
+def metered(args, opts, model, scene: str, **where):
+    """``opts`` with the scene's grey-card exposure when ``--exposure card``, else unchanged."""
+    if parse_exposure(str(args.exposure)) != CARD:
+        return opts
+    from dataclasses import replace
+
+    from kesbrdf.render.exposure import meter_exposure
+
+    stops = meter_exposure(model, scene, opts, **where)
+    stderr(f"exposure {stops:+.2f} stops, metered on the grey card")
+    return replace(opts, exposure=stops)
 
 
 def add_arguments(p):
@@ -123,10 +157,13 @@ def run(args) -> int:
         raise KesbrdfError(f"--base-color: expected a body albedo with R,G,B in [0, 1], got {args.base_color!r}")
     opts = render_options(args, base_color=base,
                           uv_rotation_deg=args.uv_rotation)
+
     if args.animation:
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
         scene = args.scene if args.scene in ("drape", "dressform", "garment") else None
+        # one exposure for the clip: metered on its first frame's scene
+        opts = metered(args, opts, args.model, scene or "drape", drape=args.animation, frame=args.first_frame)
         with Progress(TextColumn("rendering frames"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                       transient=True) as bar:
             task = bar.add_task("frames", total=None)
@@ -146,6 +183,7 @@ def run(args) -> int:
     from kesbrdf.io.model_file import load_model
 
     load_model(args.model)  # a bad model file is the one line on stderr, before any "rendering ..."
+    opts = metered(args, opts, args.model, args.scene, drape=args.drape, frame=args.frame)
     stderr(f"rendering {args.scene} at {opts.resolution[0]}x{opts.resolution[1]}, {opts.spp} spp ...")
     out = scenes.render_still(args.model, args.scene, args.output, opts, drape=args.drape, frame=args.frame)
     stderr(f"wrote {out}")

@@ -308,7 +308,7 @@ def _highlights(metrics, diagnostics) -> dict:
         for held, res in loo.items():
             value = _get(res, "metrics", "all", "nrmse")
             if value is not None:
-                out[f"leave-one-out ψ = {held}°: nrmse"] = value
+                out[f"KES interpolation (eq. 1–2), ψ = {held}° left out: nrmse"] = value
     ratios = _get(metrics, "reference", "ratio_kes_to")
     if isinstance(ratios, dict):
         for base, cases in ratios.items():

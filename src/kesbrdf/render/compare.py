@@ -13,8 +13,12 @@ Chain (one call, :func:`compare_render`):
      fitted with :func:`kesbrdf.models.halfdiff.fit_halfdiff` (kind ``kes-halfdiff``) and
      rendered by the ``kesbrdf_halfdiff`` plugin (:mod:`kesbrdf.render.halfdiff_bsdf`).
 
-   Both fits use ``fallback="log"`` (docs/method.md, "Interpolation over orientation") and ``body="auto"``.  With
-   ``models=("kes", "fibre-prior")`` the same measurement is also fitted with the fibre
+   By default (``models=("default",)``) the measurement is fitted as ``kesbrdf fit`` fits
+   it (``kind="auto"``, the default rule of docs/models.md), so the panel shows the model a
+   user gets; ``"kes"`` asks for the protocol's KES kind above, and any registered kind
+   name for that kind.  The KES fits use ``fallback="log"`` (docs/method.md,
+   "Interpolation over orientation") and ``body="auto"``.  With
+   ``models=("default", "fibre-prior")`` the same measurement is also fitted with the fibre
    prior times its residual (:meth:`kesbrdf.models.fibre_prior.FibrePriorModel.fit_measurement`,
    kind ``fibre-prior``: a KES residual table on the paper protocol, a half/difference
    one on the dense grid) and rendered by the ``kesbrdf_prior`` plugin
@@ -77,13 +81,27 @@ __all__ = [
 ]
 
 PROTOCOLS = ("paper", "dense")
-#: Models a comparison can render: ``kes`` (the protocol's KES kind: ``kes`` on the
-#: paper protocol, ``kes-halfdiff`` on the dense grid), ``fibre-prior`` (prior × residual)
-#: and ``prior-only`` (the same kind fitted with ``residual=False``: the pure prior).
-MODELS = ("kes", "fibre-prior", "prior-only")
-#: Panel titles of the models (by model kind for ``kes``).
+#: Models a comparison can render besides any registered kind name: ``default`` (the
+#: rule of ``kesbrdf fit``, ``kind="auto"``), ``kes`` (the protocol's KES kind: ``kes`` on
+#: the paper protocol, ``kes-halfdiff`` on the dense grid), ``fibre-prior`` (prior ×
+#: residual) and ``prior-only`` (the same kind fitted with ``residual=False``: the pure prior).
+MODELS = ("default", "kes", "fibre-prior", "prior-only")
+#: Panel titles by model kind (other kinds show their name).
 MODEL_TITLES = {"kes": "KES", "kes-halfdiff": "KES half/diff", "fibre-prior": "prior+residual",
                 "prior-only": "prior only"}
+
+
+def model_names() -> tuple[str, ...]:
+    """Every name ``models`` accepts: :data:`MODELS` and the registered kinds."""
+    from kesbrdf.models.base import known_fitters
+
+    return MODELS + tuple(k for k in known_fitters() if k not in MODELS)
+
+
+def model_title(name: str, kind: str) -> str:
+    """Panel title of model ``name`` that came out as ``kind``."""
+    title = MODEL_TITLES.get("prior-only" if name == "prior-only" else kind, kind)
+    return f"default: {title}" if name == "default" else title
 #: References compared by default (the CLI's, the satins, one felt).
 DEFAULT_REFERENCES = ("satin-ward", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin", "rgl-felt-white")
 #: Displayed value of the reference's 99.5th-percentile cloth luminance (auto exposure).
@@ -116,8 +134,8 @@ def default_options(**kw) -> "_scenes.RenderOptions":
     return _scenes.RenderOptions(**base)
 
 
-def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measurement=None):
-    """Measure ``ref`` virtually and fit ``model`` (one of :data:`MODELS`) for that protocol
+def fit_reference_model(ref, protocol: str = "paper", model: str = "default", measurement=None):
+    """Measure ``ref`` virtually and fit ``model`` (one of :func:`model_names`) for that protocol
     with the pipeline's fit step (:func:`kesbrdf.pipeline.fit`, spec :func:`fit_spec`).
 
     ``measurement`` reuses a measurement of ``ref`` with that protocol.  Returns
@@ -127,23 +145,28 @@ def fit_reference_model(ref, protocol: str = "paper", model: str = "kes", measur
 
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
-    if model not in MODELS:
-        raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(MODELS)}")
+    if model not in model_names():
+        raise KesbrdfError(f"unknown model {model!r}; expected one of {', '.join(model_names())}")
     from kesbrdf.pipeline import fit
 
     m = measurement if measurement is not None else measure(ref, protocol=protocol)
     return fit(m, fit_spec(protocol, model)).model, len(m)
 
 
-def fit_spec(protocol: str, model: str = "kes"):
+def fit_spec(protocol: str, model: str = "default"):
     """The pipeline's fit spec (:class:`kesbrdf.pipeline.FitSpec`) of a comparison model:
-    the protocol's KES kind with the log fallback, or the fibre prior with
-    (``fibre-prior``) or without (``prior-only``) its residual."""
+    ``kesbrdf fit``'s rule (``default``), the protocol's KES kind with the log fallback
+    (``kes``), the fibre prior with (``fibre-prior``) or without (``prior-only``) its
+    residual, or another registered kind with its defaults."""
     from kesbrdf.pipeline import FitSpec
 
+    if model == "default":
+        return FitSpec("auto")
     if model in ("fibre-prior", "prior-only"):
         return FitSpec("fibre-prior", {"residual": model == "fibre-prior"})
-    return FitSpec("kes" if protocol == "paper" else "kes-halfdiff", {"fallback": "log"})
+    if model == "kes":
+        return FitSpec("kes" if protocol == "paper" else "kes-halfdiff", {"fallback": "log"})
+    return FitSpec(model)
 
 
 def model_bsdf_dict(model_path, model, opts: "_scenes.RenderOptions") -> dict:
@@ -242,7 +265,7 @@ def _reference_renders(reference: str, scene: str, opts, o2, params, noise_floor
 
 
 def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere", opts=None,
-                   output=None, params=None, noise_floor: bool = True, models=("kes",)) -> dict:
+                   output=None, params=None, noise_floor: bool = True, models=("default",)) -> dict:
     """Render ``scene`` with the reference and with its fitted model(s); compare.
 
     Parameters
@@ -260,8 +283,9 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         PNG panel to write; the numbers go next to it as ``<stem>.json``.
     noise_floor : bool
         Also render the reference with another seed (module docstring, step 3).
-    models : sequence of :data:`MODELS`
-        Models fitted to the one measurement and rendered (default the KES kind alone).
+    models : sequence of :func:`model_names`
+        Models fitted to the one measurement and rendered (default: ``kesbrdf fit``'s
+        rule alone).
 
     Returns
     -------
@@ -277,9 +301,10 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     if protocol not in PROTOCOLS:
         raise KesbrdfError(f"unknown protocol {protocol!r}; expected one of {', '.join(PROTOCOLS)}")
     models = tuple(models)
-    bad = [mo for mo in models if mo not in MODELS] or ([] if models else ["(none)"])
+    bad = [mo for mo in models if mo not in model_names()] or ([] if models else ["(none)"])
     if bad or len(set(models)) != len(models):
-        raise KesbrdfError(f"compare: expected distinct models from {', '.join(MODELS)}, got {', '.join(models) or '(none)'}")
+        raise KesbrdfError(f"compare: expected distinct models from {', '.join(model_names())}, "
+                           f"got {', '.join(models) or '(none)'}")
     opts = (opts or default_options()).validate()
     ref = make_reference(reference, params)
     m = measure(ref, protocol=protocol)
@@ -322,7 +347,7 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
                       **{f"model:{mo}": img for mo, img in images.items()}}
     if output is not None:
         output = Path(output)
-        columns = [(f"{MODEL_TITLES[out['models'][mo]['kind'] if mo == 'kes' else mo]} model ({protocol})", results[mo])
+        columns = [(f"{model_title(mo, out['models'][mo]['kind'])} model ({protocol})", results[mo])
                    for mo in models]
         write_panel(output, first["_ref8"], first["_test8"], first["_magma"], out, columns=columns)
         meta = {k: v for k, v in out.items() if not k.startswith("_")}
