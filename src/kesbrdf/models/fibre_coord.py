@@ -342,11 +342,15 @@ def _n_params(C: int, free_td: bool) -> int:
     return C + 2 * (C + U_NODES_DEG.size + PHI_NODES_DEG.size) + (TD_NODES_DEG.size if free_td else 0)
 
 
-def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev: int = 60, base=None) -> CoordPrior:
+def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev: int = 60, base=None,
+              body_candidate: bool = True) -> CoordPrior:
     """Fit (C1) to the usable rows of ``m`` (module docstring): the parametric prior, then MAP corrections.
 
     ``base``: an already fitted :class:`~kesbrdf.models.fibre_physics.FibrePrior` of the
     same rows (else :func:`~kesbrdf.models.fibre_physics.fit_prior` is run).
+    ``body_candidate``: also fit the body-bounded candidate when the free body is above
+    eq. (B2)'s bound (doubles the fit's time then); the dense rule's leave-one-out fits
+    (:func:`kesbrdf.validate.selection.dense_orientation_loo`) leave it out.
     """
     t0 = time.perf_counter()
     ok = (m.wi[:, 2] > 1e-6) & (m.wr[:, 2] > 1e-6) & np.all(np.isfinite(m.values), axis=1)
@@ -376,7 +380,7 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
     upper = log_body_upper(y, sig * (np.maximum(y, 0) + eps) if has_sd else None)
     cands = [_map_corrections(base, wi, wr, y, sig, eps, has_sd, free_td, smooth, pull, max_nfev, None)]
     base_kd = np.array([base.parameters()[f"log_kd_{c}"] for c in range(C)])
-    if np.any(base_kd > upper + 1e-9):
+    if body_candidate and np.any(base_kd > upper + 1e-9):
         bounded = fit_prior(m, kinds=kinds, free_axes=base.spec.free_axes, rows=ok, bound_body=True)
         cands.append(_map_corrections(bounded, wi, wr, y, sig, eps, has_sd, free_td, smooth, pull, max_nfev, upper))
     best = cands[0]
