@@ -1,17 +1,26 @@
-"""Leave-one-family-out choice of the off-support σ scale (prior_model.OFF_SUPPORT_SCALE).
+"""Leave-one-family-out calibration of the σ of the ``fibre-prior`` kind (eq. U1 of
+:func:`kesbrdf.models.fibre_prior.predict_with_uncertainty`, docs/prior.md §5).
 
 For every reference of every family of benchmarks/bench_prior.py (Irawan–Marschner and
 Sadeghi presets, Ward, Ashikhmin–Shirley, the RGL felt when Mitsuba imports), the
 paper protocol is measured with 2 % noise (seeded), the ``fibre-prior`` kind is fitted
 and saved/loaded through a model file (the σ users get), and three cases are scored:
 the held-out orientations ψ = 15 … 165° (noise-free truth), and the Fig. 6 hemispheres
-θ_i = 30°, φ_i = 90° and 45° (5° viewer grid).
+θ_i = 30°, φ_i = 90° and 45° (5° viewer grid).  cov_k is the fraction of truths within
+kσ (log space), averaged over a family's references per case.
 
-σ² = v₀ + (c·d)² (eq. U1): v₀ is every term but the off-support one, d the distance from
-the measured support.  A constant c is scored per family by the mean over its
-references and cases of (cov₁ − 0.683)² + (cov₂ − 0.954)², cov_k the fraction of truths
-within kσ.  Leave-one-family-out: for each family, c is fitted on the other families
-and the coverage on the left-out family is reported; then c is fitted on all.
+* after (eq. U1): σ² = fit + spread + (c_ψ s^q d_ψ)² + ((c₀ + c₁ s) d_slice)², s the
+  fabric's misfit to the prior (:func:`misfit_level`).  (c_ψ, q, c₀, c₁) minimise, over a
+  grid, the mean over families (each weighs the same) and cases of
+  hinge(cov₁, 0.60, 0.76)² + hinge(cov₂, 0.90, 0.98)² + 0.05·((cov₁ − 0.683)² + (cov₂ − 0.954)²),
+  the distance outside the target bands plus a small pull to the Gaussian values.
+* before (eq. U1′): σ² = fit + spread + θ_d law + (c·d)², one constant c, scored the
+  same way (the σ up to 2026-12-02, ``OFF_SUPPORT_SCALE``).
+
+Leave-one-family-out: for each family the parameters are fitted on the other families
+and the coverage on the left-out family is reported, before and after; then they are
+fitted on all families (frozen in ``SIGMA_SCALES``).  Microflake/SGGX models are never
+used.
 
 Run:  python benchmarks/calibrate_sigma.py  (prints JSON; a few minutes on one core).
 """
@@ -39,19 +48,29 @@ from bench_prior import references  # noqa: E402
 from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
 from kesbrdf.measure.gonio import measure  # noqa: E402
 from kesbrdf.io.model_file import load_model as load  # noqa: E402
-from kesbrdf.models.fibre_prior import OFF_SUPPORT_SCALE, FibrePriorModel, _variance_terms, support_distance  # noqa: E402
+from kesbrdf.models.fibre_prior import (OFF_SUPPORT_SCALE, SIGMA_SCALES, FibrePriorModel,  # noqa: E402
+                                         misfit_level, support_distance, support_distance_parts, variance_parts)
 from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions  # noqa: E402
 
 NOISE = 0.02
 SEED = 3
 HEMI_STEP_DEG = 5.0
-#: Candidate scales (σ of ln f per radian), log-spaced plus 0.
-GRID = np.concatenate([[0.0], np.geomspace(0.01, 10.0, 121)])
+CASES = ("held_out", "hemi90", "hemi45")
+#: Target bands of issue 20 (within 1σ, within 2σ) and the Gaussian values.
+BAND1, BAND2 = (0.60, 0.76), (0.90, 0.98)
 TARGET = (0.683, 0.954)
+#: Largest σ of ln f (fibre_prior.MAX_SIGMA_LOG).
+CAP = 3.0
+#: Candidate c of the one-constant σ (before), log-spaced plus 0.
+GRID_BEFORE = np.concatenate([[0.0], np.geomspace(0.01, 10.0, 121)])
+#: Candidate (c_ψ, q, c₀, c₁) of eq. U1 (after).
+GRID_AFTER = [(a, q, b, c) for a in (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0) for q in (0.5, 0.75, 1.0)
+              for b in (0.0, 0.1, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5)
+              for c in (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)]
 
 
-def cases(ref, tmp: Path):
-    """[(case, |Δ ln f|, v₀, d)] of one reference, σ from the saved-and-loaded model file."""
+def cases(ref, tmp: Path) -> dict:
+    """{case: ingredients of σ} of one reference, σ from the saved-and-loaded model file."""
     m = measure(ref, noise=NOISE, noise_floor=1e-4, rng=SEED)
     FibrePriorModel.fit_measurement(m).save(tmp / "m.kes.json")
     model = load(tmp / "m.kes.json")
@@ -62,52 +81,60 @@ def cases(ref, tmp: Path):
     for (ti, pi), tag in zip(HEMISPHERE_LIGHTS_DEG, ("hemi90", "hemi45")):
         wi = np.broadcast_to(spherical_to_cartesian(np.radians(ti), np.radians(pi)), wr.shape)
         sets.append((tag, wi, wr, np.asarray(ref(wi, wr), float)))
-    out = []
+    s = misfit_level(model)
+    out = {}
     for tag, wi, wr_, truth in sets:
         wi, wr_ = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr_, float))
         f = model.evaluate(wi, wr_)
-        v0 = _variance_terms(model, wi, wr_, f)
-        kes, model.kes = model.kes, None
-        v_old = _variance_terms(model, wi, wr_, f)  # the σ of files without the KES candidate
-        model.kes = kes
-        d = support_distance(model.support, wi, wr_)
+        parts = variance_parts(model, wi, wr_, f)
+        d_slice, d_psi = support_distance_parts(model.support, wi, wr_)
         eps = max(float(np.max(truth)), 1e-300) * 1e-4
         r = np.abs(np.log(np.maximum(truth, 0) + eps) - np.log(np.maximum(f, 0) + eps))
-        out.append((tag, r, v0, np.broadcast_to(d[:, None], r.shape), v_old))
+        out[tag] = {"r": r, "base": parts["fit"] + parts["spread"], "law": parts["theta_d_law"], "s": s,
+                    "d": support_distance(model.support, wi, wr_)[:, None], "d_slice": d_slice[:, None],
+                    "d_psi": d_psi[:, None]}
     return out
 
 
-def coverage_at(c, r, v0, d, cap=3.0):
-    sl = np.minimum(np.sqrt(v0 + (c * d) ** 2), cap)
-    z = r / np.maximum(sl, 1e-12)
-    return float(np.mean(z <= 1)), float(np.mean(z <= 2))
+def sigma_log(c: dict, form: str, p) -> np.ndarray:
+    """σ of ln f of one case: ``before`` (p = c) or ``after`` (p = (c_ψ, q, c₀, c₁))."""
+    if form == "before":
+        var = c["base"] + c["law"] + (p * c["d"]) ** 2
+    else:
+        var = c["base"] + (p[0] * c["s"] ** p[1] * c["d_psi"]) ** 2 + ((p[2] + p[3] * c["s"]) * c["d_slice"]) ** 2
+    return np.minimum(np.sqrt(var), CAP)
 
 
-def family_loss(c, rows):
-    """Mean over a family's references and cases of the squared coverage misses."""
-    losses = []
-    for ref_cases in rows:
-        for _, r, v0, d, _ in ref_cases:
-            c1, c2 = coverage_at(c, r, v0, d)
-            losses.append((c1 - TARGET[0]) ** 2 + (c2 - TARGET[1]) ** 2)
-    return float(np.mean(losses))
-
-
-def best_scale(fams: dict) -> float:
-    """The grid value minimising the mean family loss (each family weighs the same)."""
-    loss = [np.mean([family_loss(c, rows) for rows in fams.values()]) for c in GRID]
-    return float(GRID[int(np.argmin(loss))])
-
-
-def family_coverage(c, rows, old=False) -> dict:
-    """{case: [mean cov₁, mean cov₂]} over a family's references (``old``: the σ of files
-    without the KES candidate and the off-support term)."""
+def family_coverage(rows, form, p) -> dict:
+    """{case: [mean cov₁, mean cov₂]} over a family's references."""
     out = {}
-    for tag in ("held_out", "hemi90", "hemi45"):
-        cov = [coverage_at(0.0, r, vo, d) if old else coverage_at(c, r, v0, d)
-               for ref_cases in rows for t, r, v0, d, vo in ref_cases if t == tag]
-        out[tag] = [float(np.mean([x[0] for x in cov])), float(np.mean([x[1] for x in cov]))]
+    for tag in CASES:
+        cov = []
+        for ref_cases in rows:
+            c = ref_cases[tag]
+            z = c["r"] / np.maximum(sigma_log(c, form, p), 1e-12)
+            cov.append((np.mean(z <= 1), np.mean(z <= 2)))
+        out[tag] = [round(float(np.mean([x[0] for x in cov])), 4), round(float(np.mean([x[1] for x in cov])), 4)]
     return out
+
+
+def _hinge(x, lo, hi):
+    return max(lo - x, 0.0) + max(x - hi, 0.0)
+
+
+def family_loss(cov: dict) -> float:
+    """Mean over cases of the squared distance outside the bands + a small Gaussian pull."""
+    return float(np.mean([_hinge(c1, *BAND1) ** 2 + _hinge(c2, *BAND2) ** 2
+                          + 0.05 * ((c1 - TARGET[0]) ** 2 + (c2 - TARGET[1]) ** 2) for c1, c2 in cov.values()]))
+
+
+def in_bands(cov: dict) -> bool:
+    return all(BAND1[0] <= c1 <= BAND1[1] and BAND2[0] <= c2 <= BAND2[1] for c1, c2 in cov.values())
+
+
+def loss_table(fams: dict, form: str, grid) -> np.ndarray:
+    """(len(grid), n_families) family losses, computed once for every fold."""
+    return np.array([[family_loss(family_coverage(rows, form, p)) for rows in fams.values()] for p in grid])
 
 
 def run() -> dict:
@@ -118,20 +145,32 @@ def run() -> dict:
                 fams[fam] = [cases(ref, Path(tmp)) for ref in refs.values()]
                 names[fam] = list(refs)
                 print(f"{fam}: {len(refs)} references", file=sys.stderr)
-    result = {"noise": NOISE, "seed": SEED, "hemi_step_deg": HEMI_STEP_DEG, "lofo": {}}
-    for fam in fams:
-        c = best_scale({k: v for k, v in fams.items() if k != fam})
-        result["lofo"][fam] = {"scale": c, "coverage": family_coverage(c, fams[fam]),
-                               "coverage_without_term": family_coverage(0.0, fams[fam]),
-                               "coverage_old_file": family_coverage(0.0, fams[fam], old=True)}
-    c_all = best_scale(fams)
-    result["scale_all_families"] = c_all
-    result["coverage_all"] = {fam: family_coverage(c_all, rows) for fam, rows in fams.items()}
-    # the constant frozen in the code (c_all rounded), per family and per reference
-    result["frozen_scale"] = OFF_SUPPORT_SCALE
-    result["coverage_frozen"] = {fam: family_coverage(OFF_SUPPORT_SCALE, rows) for fam, rows in fams.items()}
+    result = {"noise": NOISE, "seed": SEED, "hemi_step_deg": HEMI_STEP_DEG, "bands": [list(BAND1), list(BAND2)],
+              "misfit_s": {f"{fam}/{n}": round(float(rows[i]["held_out"]["s"]), 4)
+                           for fam, rows in fams.items() for i, n in enumerate(names[fam])},
+              "lofo": {}}
+    fam_names = list(fams)
+    tables = {"before": (GRID_BEFORE, loss_table(fams, "before", GRID_BEFORE)),
+              "after": (GRID_AFTER, loss_table(fams, "after", GRID_AFTER))}
+    summary = {"before": 0, "after": 0}
+    for j, fam in enumerate(fam_names):
+        row = {}
+        for form, (grid, table) in tables.items():
+            keep = [k for k in range(len(fam_names)) if k != j]
+            p = grid[int(np.argmin(table[:, keep].mean(axis=1)))]
+            cov = family_coverage(fams[fam], form, p)
+            row[form] = {"params": [float(v) for v in np.atleast_1d(p)], "coverage": cov, "in_bands": in_bands(cov)}
+            summary[form] += in_bands(cov)
+        result["lofo"][fam] = row
+    result["families_in_bands_lofo"] = summary
+    for form, (grid, table) in tables.items():
+        result[f"params_all_families_{form}"] = [float(v) for v in np.atleast_1d(grid[int(np.argmin(table.mean(axis=1)))])]
+    frozen = tuple(SIGMA_SCALES[k] for k in ("azimuth", "azimuth_power", "slice", "slice_misfit"))
+    result["frozen"] = {"SIGMA_SCALES": dict(SIGMA_SCALES), "OFF_SUPPORT_SCALE": OFF_SUPPORT_SCALE}
+    result["coverage_frozen"] = {fam: {"before": family_coverage(rows, "before", OFF_SUPPORT_SCALE),
+                                       "after": family_coverage(rows, "after", frozen)} for fam, rows in fams.items()}
     result["coverage_frozen_references"] = {
-        f"{fam}/{name}": family_coverage(OFF_SUPPORT_SCALE, [ref_cases])
+        f"{fam}/{name}": family_coverage([ref_cases], "after", frozen)
         for fam, rows in fams.items() for name, ref_cases in zip(names[fam], rows)}
     return result
 
