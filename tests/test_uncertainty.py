@@ -15,10 +15,11 @@ from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import write_measurement
 from kesbrdf.io.model_file import load_model as load
 from kesbrdf.models.fibre_prior import FibrePriorModel
-from kesbrdf.references.irawan2012 import Irawan2012
+from kesbrdf.references.irawan2012 import PRESET_NAMES as IRAWAN_PRESETS, Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
+from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validate.uncertainty import coverage, predict_sigma
+from kesbrdf.validate.uncertainty import coverage, predict_sigma, within_bands
 from kesbrdf.validate.compare import HELD_OUT_DEG, hemisphere_directions
 
 # Calibration of the σ a model FILE carries: fit (Laplace) ⊕ spread to the pure prior
@@ -238,3 +239,88 @@ def test_bad_support_is_one_error_naming_the_file_once(fitted, tmp_path):
     text = str(exc.value)
     assert text.count("bad.kes.json") == 1 and "support" in text and "nan" in text.lower()
     assert "\n" not in text
+
+
+# --- Issue 20: σ coverage inside its bands, per family --------------------------------
+# The σ (eq. U1, SIGMA_SCALES) was calibrated by benchmarks/calibrate_sigma.py on five
+# families; this checks two of them against the issue's bands (COVERAGE_BANDS: within 1σ
+# 60–76 %, within 2σ 90–98 %), each case a family mean over its references like the
+# benchmark.  Ward (both references, ~4 s to fit each) is the fast test; the six
+# Irawan–Marschner presets (~45 s of fits) are the `slow` one.  At the frozen scales the
+# benchmark (5° hemispheres) gives Ward [1σ, 2σ] = held-out [0.70, 0.98], φ_i = 90°
+# [0.73, 0.99], 45° [0.68, 1.00]; Irawan [0.71, 0.93], [0.60, 0.90], [0.58, 0.89].  The
+# other three families are outside the bands (docs/prior.md §5).
+# Tolerance FAMILY_BAND_TOL = 0.05 each side of each band: (a) the hemispheres here are
+# the 10° grid (324 viewers) where the benchmark uses 5° (1296), which moves the family
+# means by ≤ 0.01 (measured at the frozen scales: 0.006 at most); (b) the errors are smooth in
+# direction, so of n ≈ 300–1000 truths per case only tens to a hundred are independent:
+# at n_eff ≈ 100 the binomial sd of a fraction near 0.7 is 0.046.  A σ scaled 3× (or
+# ÷ 3) moves the coverage by 0.2–0.5 and fails (test below).
+FAMILY_BAND_TOL = 0.05
+FAMILIES = {
+    "ward": {"ward_0.1_0.3": AnisotropicWard(0.1, 0.3, 0.3, 0.05),
+             "ward_0.25_0.08": AnisotropicWard(0.25, 0.08, [0.2, 0.15, 0.1], 0.1)},
+    "irawan2012": {n: Irawan2012(n) for n in IRAWAN_PRESETS},
+}
+
+
+def _cases(fitted, fam, d) -> list:
+    """[(case, f, σ_ln f, truth)] over the references of ``fam``, from saved model files."""
+    wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
+    wr = wr.reshape(-1, 3)
+    rows = []
+    for name, ref in FAMILIES[fam].items():
+        key = "irawan_twill" if name == "cotton_twill" else name
+        if key in fitted:
+            path = fitted[key][2]
+        else:
+            path = d / f"{name}.kes.json"
+            FibrePriorModel.fit_measurement(measure(ref, noise=0.02, noise_floor=1e-4, rng=3)).save(path)
+        model = load(path)
+        held = measure(ref, orientations_deg=HELD_OUT_DEG)
+        rows.append(("held_out",) + tuple(predict_sigma(model, held.wi, held.wr)[::2]) + (held.values,))
+        for phi_i in (90.0, 45.0):
+            wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(phi_i)), wr.shape)
+            rows.append((f"hemi{phi_i:g}",) + tuple(predict_sigma(model, wi, wr)[::2]) + (ref(wi, wr),))
+    return rows
+
+
+@pytest.fixture(scope="module")
+def ward_cases(fitted, tmp_path_factory):
+    return _cases(fitted, "ward", tmp_path_factory.mktemp("ward"))
+
+
+def _family_coverage(rows, sigma_factor=1.0) -> dict:
+    """{case: (mean within 1σ, mean within 2σ)} over a family's references."""
+    out = {}
+    for case in ("held_out", "hemi90", "hemi45"):
+        cov = [coverage(f, sigma_factor * sl, t) for c, f, sl, t in rows if c == case]
+        out[case] = (np.mean([c["within_1sigma"] for c in cov]), np.mean([c["within_2sigma"] for c in cov]))
+    return out
+
+
+def _assert_in_bands(family, rows):
+    for case, (c1, c2) in _family_coverage(rows).items():
+        assert within_bands(c1, c2, tol=FAMILY_BAND_TOL), (family, case, c1, c2)
+
+
+def test_sigma_coverage_inside_its_bands_ward(ward_cases):
+    """Issue 20: within 1σ 60–76 %, within 2σ 90–98 % of held-out truths, on the held-out
+    orientations and both hemispheres (± FAMILY_BAND_TOL), Ward family."""
+    _assert_in_bands("ward", ward_cases)
+
+
+@pytest.mark.slow
+def test_sigma_coverage_inside_its_bands_irawan(fitted, tmp_path):
+    """The same bands on the six Irawan–Marschner presets (slow: five more fits)."""
+    _assert_in_bands("irawan2012", _cases(fitted, "irawan2012", tmp_path))
+
+
+@pytest.mark.parametrize("factor", [3.0, 1 / 3.0])
+def test_uncalibrated_sigma_fails_the_bands(factor, ward_cases):
+    """The band check can fail: the same σ scaled 3× (too wide) or ÷ 3 (too narrow)
+    leaves the bands on some case."""
+    cov = _family_coverage(ward_cases, factor)
+    assert not all(within_bands(c1, c2, tol=FAMILY_BAND_TOL) for c1, c2 in cov.values()), (factor, cov)
+    # and the calibrated σ of the same cases is inside (the test above, one line here)
+    assert all(within_bands(c1, c2, tol=FAMILY_BAND_TOL) for c1, c2 in _family_coverage(ward_cases).values())

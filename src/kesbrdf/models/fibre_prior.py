@@ -509,7 +509,7 @@ OFF_SUPPORT_SCALE = 0.60
 #: and both Fig. 6 hemispheres, to land within 1σ in 60–76 % and within 2σ in 90–98 %;
 #: the leave-one-family-out fits and the coverage they give on the family left out are
 #: in docs/prior.md §5 (2026-12-03).
-SIGMA_SCALES = {"azimuth": 0.5, "azimuth_power": 0.5, "slice": 0.30, "slice_misfit": 3.0}
+SIGMA_SCALES = {"azimuth": 1.0, "azimuth_power": 0.75, "slice": 0.30, "slice_misfit": 3.0}
 
 
 def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_support_scale=None, scales=None):
@@ -533,7 +533,7 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_supp
     * between orientations: d_ψ = sin θ_i times the light's azimuth gap to the nearest
       measured orientation ψ_k, mod 180° (:func:`support_distance_parts`); the residual
       that carries the fabric's departure from the prior is interpolated there, so the
-      term grows with s (as s^q, q = ½: the held-out errors of well-fitted fabrics sit
+      term grows with s (as s^q, q = ¾: the held-out errors of well-fitted fabrics sit
       near the noise, not in proportion to s);
     * off the measured slice: d_slice, θ_d outside the measured θ_d range and γ beyond
       the largest measured deviation; a floor c₀ (the prior's θ_d/γ extrapolation is
@@ -546,7 +546,8 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_supp
 
     Logs use ε = 10⁻⁴·max f so dark regions do not dominate.  A model read from a file
     written before the KES candidate and the support were stored lacks the spread to it
-    and the off-support terms (its diagnostics say so).
+    and the off-support terms and keeps the θ_d-law term of eq. (U1′) (its diagnostics
+    say so).
 
     Returns
     -------
@@ -570,6 +571,8 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_supp
         var = parts["fit"] + parts["spread"]
         if model.support is not None:
             var = var + off_support_variance(model, wi, wr, scales)[:, None]
+        else:  # files without the support: the θ_d-law term is their only off-slice growth
+            var = var + parts["theta_d_law"]
     sigma_log = np.minimum(np.sqrt(np.maximum(var, 0)), MAX_SIGMA_LOG)
     return f, f * sigma_log, sigma_log
 
