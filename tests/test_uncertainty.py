@@ -242,7 +242,7 @@ def test_bad_support_is_one_error_naming_the_file_once(fitted, tmp_path):
 
 
 # --- Issue 20: σ coverage inside its bands, per family --------------------------------
-# The σ (eq. U1, SIGMA_SCALES) was calibrated by benchmarks/calibrate_sigma.py on five
+# The σ (eq. U1, SIGMA_SCALES) was calibrated by benchmarks/bench_calibrate_sigma.py on five
 # families; this checks two of them against the issue's bands (COVERAGE_BANDS: within 1σ
 # 60–76 %, within 2σ 90–98 %), each case a family mean over its references like the
 # benchmark.  Ward (both references, ~4 s to fit each) is the fast test; the six

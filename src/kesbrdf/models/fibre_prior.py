@@ -495,7 +495,7 @@ MAX_SIGMA_LOG = 3.0
 
 #: Scale c of the earlier one-constant off-support term σ_off = c·d (eq. U2, σ of ln f
 #: per radian), with the θ_d-law term: the σ before the misfit-scaled terms (eq. U1′),
-#: kept for ``off_support_scale=`` and as the "before" of benchmarks/calibrate_sigma.py.
+#: kept for ``off_support_scale=`` and as the "before" of benchmarks/bench_calibrate_sigma.py.
 #: Leave-one-family-out it left every family outside the coverage bands (docs/prior.md §5).
 OFF_SUPPORT_SCALE = 0.60
 
@@ -503,7 +503,7 @@ OFF_SUPPORT_SCALE = 0.60
 #: ``azimuth`` c_ψ multiplies s^q·d_ψ, q = ``azimuth_power`` (between the measured
 #: orientations the residual is interpolated, and its error grows with how far the
 #: prior is from the fabric, s); ``slice`` c₀ and ``slice_misfit`` c₁ give
-#: (c₀ + c₁ s)·d_slice off the measured slice (θ_d outside its range, γ beyond it).  Provenance: benchmarks/calibrate_sigma.py,
+#: (c₀ + c₁ s)·d_slice off the measured slice (θ_d outside its range, γ beyond it).  Provenance: benchmarks/bench_calibrate_sigma.py,
 #: fitted on all five reference families (Irawan–Marschner and Sadeghi presets, Ward,
 #: Ashikhmin–Shirley, the RGL felt) at 2 % noise, paper protocol, held-out orientations
 #: and both Fig. 6 hemispheres, to land within 1σ in 60–76 % and within 2σ in 90–98 %;
