@@ -586,7 +586,7 @@ def off_support_variance(model: FibrePriorModel, wi, wr, scales=None) -> np.ndar
 
 
 def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
-    """Fit + spread + θ_d-law terms of eq. (U1), shape (N, C) (the σ of files before the
+    """Fit + spread + θ_d-law terms of eq. (U1′), shape (N, C) (the σ of files before the
     calibrated off-support term; :func:`variance_parts` gives them one by one)."""
     parts = variance_parts(model, wi, wr, f, others)
     return parts["fit"] + parts["spread"] + parts["theta_d_law"]
