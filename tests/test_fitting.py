@@ -169,3 +169,30 @@ def test_auto_on_scattered_data_keeps_the_better_in_five_fold_validation():
     assert c["kept"] == min(c["median"], key=c["median"].get)
     assert model.kind == ("fibre-prior" if c["kept"] == "fibre-prior" else "kes")
     assert report.rows_used == report.rows_total == len(one)
+
+
+def test_rows_too_sparse_for_the_larger_kind_go_to_the_subset_fit():
+    """The subset rule (docs/models.md): the paper protocol plus a few mirror samples is
+    fitted as the paper protocol, and the report says which rows were left and why."""
+    from kesbrdf.measure.planning import simulate
+    from kesbrdf.models.brdf import evaluate
+    from kesbrdf.models.halfdiff import MIN_TABLE_COVERAGE, table_coverage
+
+    m = simulate(WARD, ("paper", "specular:18", "specular:60"))
+    paper = simulate(WARD, ("paper",))
+    assert table_coverage(m) < MIN_TABLE_COVERAGE <= table_coverage(measure(WARD, protocol="dense", step_deg=10))
+    model, report = kesbrdf.fit(m, compare=False)
+    assert (report.fitter, report.rows_used, report.rows_total) == ("kes", 116, 124)
+    assert "kes-halfdiff could use 124" in report.reason and "kes-halfdiff: its (theta_h, theta_d) table" in report.rows_unused
+    alone = kesbrdf.fit(paper, compare=False)[0]
+    wi, wr = m.wi, m.wr
+    np.testing.assert_array_equal(evaluate(model, wi, wr), evaluate(alone, wi, wr))  # the same table
+
+
+def test_a_few_out_of_plane_rows_go_to_the_subset_fit():
+    from kesbrdf.measure.planning import simulate
+
+    m = simulate(WARD, ("paper", "oop:30"))
+    _, report = kesbrdf.fit(m, compare=False)
+    assert (report.fitter, report.rows_used) == ("kes", 116)
+    assert "only 4 of 120 rows are out of the plane" in report.rows_unused

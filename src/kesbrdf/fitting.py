@@ -13,7 +13,11 @@ The CLI (``kesbrdf fit``), the viewer's upload and the demo all call :func:`fit`
   squares, with its sample-frame warp recorded).
 
 When no candidate uses every row, the one that uses the most wins (the earlier on a
-tie).  The library never prints: the choice, the reason, the rows used and the rows
+tie).  The subset rule (:func:`choose_fitter`, docs/models.md "More rows never predict
+worse"): a candidate whose ``sparse_rows`` says the rows it would add are too sparse for
+it (a few incidence angles beside the paper's line, a few out-of-plane samples) is passed
+over for the candidate that fits the rest, so extra samples never make the fit worse
+than the fit to the subset.  The library never prints: the choice, the reason, the rows used and the rows
 not used (how many, and why) come back in a :class:`FitReport`, together with the
 model's one-line warnings (e.g. the log fallback where K(φ) ≤ 0).
 
@@ -31,7 +35,7 @@ import numpy as np
 from kesbrdf.errors import KesbrdfError, MeasurementError
 from kesbrdf.models.base import AUTO_CANDIDATES, fitter_class, known_fitters
 
-__all__ = ["fit", "FitReport", "choose_fitter"]
+__all__ = ["fit", "FitReport", "choose_fitter", "SUBSET_RULE"]
 
 
 @dataclass
@@ -119,12 +123,27 @@ class FitReport:
         }
 
 
+#: The subset rule (docs/models.md, "More rows never predict worse"): a candidate whose
+#: ``sparse_rows`` says the rows it would add are too sparse for it is passed over when
+#: another candidate can fit the rest.  False restores the rule before it ("the kind
+#: that uses every row"): for tests that show what the rule prevents, not for users.
+SUBSET_RULE = True
+
+
 def choose_fitter(measurement, candidates=None):
-    """(name, mask, reason-for-unused, why, {name: rows usable}) of the automatic choice."""
+    """(name, mask, reason-for-unused, why, {name: rows usable}) of the automatic choice.
+
+    The candidate that uses the most rows wins (the earlier on a tie), except that a
+    fitter whose optional ``sparse_rows(measurement)`` gives a reason (the rows it could
+    use beyond a simpler kind's are too sparse for it to use well) is passed over
+    whenever another candidate can use some rows: that one then fits the subset it
+    uses, and the rest are reported unused with the reason (:data:`SUBSET_RULE`).
+    """
     m = measurement
     names = list(AUTO_CANDIDATES if candidates is None else candidates)
     n = len(m)
     best = None
+    thin = None  # the best candidate set aside by sparse_rows
     counts = {}
     notes = {}
     for name in names:
@@ -138,15 +157,27 @@ def choose_fitter(measurement, candidates=None):
         used = int(np.count_nonzero(mask))
         counts[name] = used
         notes[name] = why_not
+        sparse = getattr(cls, "sparse_rows", None) if SUBSET_RULE and used else None
+        too_thin = sparse(m) if sparse is not None else None
+        if too_thin:
+            if thin is None or used > thin[2]:
+                thin = (name, mask, used, why_not, too_thin)
+            continue
         if best is None or used > best[2]:
             best = (name, mask, used, why_not)
         if used == n and n > 0:
             break
+    if (best is None or best[2] == 0) and thin is not None:
+        best, thin = thin[:4], None  # nothing else can fit: the sparse candidate after all
     if best is None or best[2] == 0:
         detail = "; ".join(f"{k}: {v}" for k, v in notes.items())
         raise MeasurementError(f"{m.source or 'measurement'}: no model kind can use this measurement: {detail}")
     name, mask, used, why_not = best
-    if used == n:
+    if thin is not None and thin[2] > used:
+        why = (f"uses {used} of {n} rows; {thin[0]} could use {thin[2]} but {thin[4]}, and a fit to rows too "
+               f"sparse for its kind predicts worse than this fit to the subset (more rows never predict worse)")
+        why_not = f"{why_not}; {thin[0]}: {thin[4]}" if why_not else f"{thin[0]}: {thin[4]}"
+    elif used == n:
         why = f"uses every row ({_protocol(name)})"
     else:
         others = ", ".join(f"{k} {v}" for k, v in counts.items() if k != name)

@@ -75,7 +75,10 @@ def small_plan(reference, say) -> dict:
     d = result.to_dict()
     scored = {k: p for k, p in d["protocols"].items() if not p.get("over_budget")}
     for name, p in scored.items():
-        stderr(f"    {name}: {p['n_samples']} samples, expected hemisphere NRMSE {p['median']:.3f} (fit: {', '.join(p['kinds'])})")
+        unused = p["n_samples"] - p.get("rows_used", p["n_samples"])
+        note = f"; {unused} samples too sparse for a larger kind, not used" if unused > 0 else ""
+        stderr(f"    {name}: {p['n_samples']} samples, expected hemisphere NRMSE {p['median']:.3f} "
+               f"(fit: {', '.join(p['kinds'])}{note})")
     base = scored.get("paper")
     worse = [k for k, p in scored.items() if base and k != "paper" and p["median"] > base["median"]]
     if worse:

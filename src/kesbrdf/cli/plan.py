@@ -64,7 +64,10 @@ def run(args) -> int:
         if p.get("over_budget"):
             stderr(f"  {name:20s} {p['n_samples']:4d} samples  over budget")
         else:
-            stderr(f"  {name:20s} {p['n_samples']:4d} samples  expected hemisphere NRMSE {p['median']:.3f}  ({', '.join(p['kinds'])})")
+            unused = p["n_samples"] - p.get("rows_used", p["n_samples"])
+            note = f"; {unused} not used by the fit" if unused > 0 else ""
+            stderr(f"  {name:20s} {p['n_samples']:4d} samples  expected hemisphere NRMSE {p['median']:.3f}  "
+                   f"({', '.join(p['kinds'])}{note})")
     rec = doc["recommendation"]
     if len(rec) > 1:
         stderr("recommended additions: " + ", ".join(f"{r['add']} (-> {r['median']:.3f} at {r['n_samples']})" for r in rec[1:]))

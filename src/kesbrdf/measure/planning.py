@@ -178,7 +178,8 @@ def simulate(truth, groups, noise: float = 0.0, rng=None) -> Measurement:
 
 
 def default_fit(m: Measurement):
-    """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row.
+    """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row it can use well
+    (the subset rule of :func:`kesbrdf.fitting.choose_fitter`).
 
     Without the held-out comparison with the prior (``compare=False``): the planner fits
     every candidate protocol many times, and a comparison costs four prior fits (the
@@ -244,10 +245,13 @@ def expected_error(truths, groups, fit=default_fit, noise: float = 0.0, seed: in
     """Hemisphere NRMSE of the default fit from ``groups`` (module docstring).
 
     ``truths`` is a list of :class:`_Truth`.  Returns ``{"median", "per_truth":
-    {name: {"median", "per_light"}}, "n_samples", "kind"}``; a truth whose fit fails
-    records its error message and counts as NRMSE 1.
+    {name: {"median", "per_light"}}, "n_samples", "kinds", "rows_used"}``; a truth whose
+    fit fails records its error message and counts as NRMSE 1.  ``rows_used`` is the
+    fewest rows a fit used (its ``FitReport``): below ``n_samples`` the default fit left
+    samples its kinds cannot use well (the subset rule, :func:`kesbrdf.fitting.choose_fitter`),
+    so the protocol scores as the subset it did use.
     """
-    per_truth, allv, kinds = {}, [], set()
+    per_truth, allv, kinds, used = {}, [], set(), []
     n = 0
     for k, t in enumerate(truths):
         m = simulate(t.brdf, groups, noise=noise, rng=seed + k)
@@ -259,13 +263,16 @@ def expected_error(truths, groups, fit=default_fit, noise: float = 0.0, seed: in
             allv.append(1.0)
             continue
         kinds.add(model.kind)
+        report = (model.diagnostics or {}).get("fit_report") if isinstance(model.diagnostics, dict) else None
+        used.append(int(report["rows_used"]) if report and "rows_used" in report else n)
         errs = _model_errors(model, t)
         per_truth[t.name] = {
             "median": float(np.median(errs)),
             "per_light": {f"{a:g},{b:g}": float(e) for ((a, b), _, _), e in zip(t.lights, errs)},
         }
         allv.append(float(np.median(errs)))
-    return {"median": float(np.median(allv)), "per_truth": per_truth, "n_samples": n, "kinds": sorted(kinds)}
+    return {"median": float(np.median(allv)), "per_truth": per_truth, "n_samples": n, "kinds": sorted(kinds),
+            "rows_used": min(used) if used else 0}
 
 
 @dataclass

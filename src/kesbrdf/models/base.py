@@ -311,6 +311,13 @@ class ReflectanceModel:
         """Why ``kind="auto"`` should not consider this kind for ``measurement`` (or None)."""
         return None
 
+    @classmethod
+    def sparse_rows(cls, measurement) -> str | None:
+        """Why ``kind="auto"`` should not let this kind take rows beyond a simpler kind's
+        (or None): they are too sparse for it to use well, and a fit to them would predict
+        worse than the simpler kind's fit to its subset (:func:`kesbrdf.fitting.choose_fitter`)."""
+        return None
+
     def save(self, path):
         """Write the model file atomically (:mod:`kesbrdf.io.model_writer`)."""
         from kesbrdf.io.model_writer import save_model

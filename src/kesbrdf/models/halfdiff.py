@@ -130,6 +130,8 @@ __all__ = [
     "NORMALISATIONS",
     "HalfDiffModel",
     "fit_halfdiff",
+    "table_coverage",
+    "MIN_TABLE_COVERAGE",
     "evaluate_halfdiff",
     "in_plane_half_diff",
     "to_half_diff",
@@ -296,6 +298,67 @@ class HalfDiffModel(ReflectanceModel):
         if other:
             parts.append(f"{other} at orientations other than psi = 0, 45, 90, 135 deg")
         return mask, "; ".join(parts)
+
+    @classmethod
+    def sparse_rows(cls, measurement) -> str | None:
+        """Why ``kind="auto"`` should not let this kind use the rows beyond a simpler kind's
+        (or None): they fill too little of its (θ_h, θ_d) table (:func:`table_coverage`).
+
+        Step 3 of the fit (module docstring) interpolates each slot's samples linearly
+        over (θ_h, θ_d); a few incidence angles beside the paper's line leave most of the
+        table between distant samples, where the Delaunay triangles spread a mirror peak
+        over half the table (docs/decisions.md, "More rows never predict worse").
+        """
+        try:
+            cover = table_coverage(measurement)
+        except KesbrdfError:
+            return None
+        if cover >= MIN_TABLE_COVERAGE:
+            return None
+        return (f"its (theta_h, theta_d) table would be {100 * cover:.0f} % pinned by samples "
+                f"(needs {100 * MIN_TABLE_COVERAGE:.0f} %: a dense in-plane grid)")
+
+
+#: Smallest :func:`table_coverage` for which ``kind="auto"`` lets ``kes-halfdiff`` use
+#: rows beyond a simpler kind's (``sparse_rows``).  Measured (kesbrdf plan groups, 6°
+#: dense grid): dense 1.00; the paper protocol plus incidence lines or mirror samples
+#: 0.18–0.43 (paper alone 0.18, + two lines 0.43, + five lines 0.38 at their finer
+#: step), and those all predicted the hemispheres worse than ``kes`` on the paper rows
+#: alone (docs/decisions.md).  3/4 sits in the gap: most of the table next to a sample.
+MIN_TABLE_COVERAGE = 0.75
+
+
+def table_coverage(m: Measurement, orientations=None) -> float:
+    """Fraction of the in-plane (θ_h, θ_d) table nodes with a sample within 1.5 grid steps.
+
+    Nodes: the measured in-plane triangle θ_h ≤ θ_d, θ_h + θ_d ≤ θ_max on the fit's
+    grid (the data's natural step, :func:`fit_halfdiff` step 3); the fraction is the
+    smallest over the half-azimuth slots.  A dense (θ_i, θ_r) grid reaches 1 (its
+    checkerboard in (θ_h, θ_d) puts a sample next to every node); one incidence line
+    pins about a fifth.
+    """
+    orientations, _, rows = _halfdiff_rows(m, orientations)
+    used = np.concatenate(rows)
+    theta_h, theta_d, _ = in_plane_half_diff(m.theta_i[used], m.theta_r[used])
+    step, _ = _natural_step(np.concatenate([theta_h, theta_d]), None)
+    theta_max = float(np.max(np.maximum(m.theta_i[used], m.theta_r[used])))
+    H, D = np.meshgrid(_uniform_grid(theta_max / 2, step), _uniform_grid(theta_max, step), indexing="ij")
+    inside = (H <= D + ANGLE_TOL) & (H + D <= theta_max + ANGLE_TOL)
+    nodes = np.stack([H[inside], D[inside]], axis=-1)
+    worst = 1.0
+    for r in rows:
+        th, td, upper = in_plane_half_diff(m.theta_i[r], m.theta_r[r])
+        mirror = np.abs(m.theta_r[r] - m.theta_i[r]) < ANGLE_TOL
+        for sel in (upper | mirror, ~upper | mirror):
+            points = np.stack([th[sel], td[sel]], axis=-1)
+            if not points.size:
+                return 0.0
+            near = np.zeros(len(nodes), bool)
+            for chunk in np.array_split(np.arange(len(points)), max(1, len(points) // 256)):
+                d = np.linalg.norm(nodes[:, None, :] - points[None, chunk, :], axis=-1)
+                near |= np.any(d <= 1.5 * step, axis=1)
+            worst = min(worst, float(np.mean(near)))
+    return worst
 
 
 # ---------------------------------------------------------------------------------

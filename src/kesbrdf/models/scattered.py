@@ -685,6 +685,23 @@ class ScatteredFit:
         return None
 
     @classmethod
+    def sparse_rows(cls, measurement) -> str | None:
+        """Why ``kind="auto"`` should not let this fit take the rows beyond a simpler kind's
+        (or None): fewer than half the rows are out of the plane of incidence.
+
+        The same reason as :meth:`auto_skip`, by degree: a least-squares table fitted
+        mostly to planes (the paper's 116 samples and 8 out-of-plane ones) interpolates
+        the planes worse than the KES kinds do and is pinned off them by a few samples; it
+        predicted the hemispheres worse than ``kes`` on the in-plane rows alone on 5 of 6
+        references (docs/decisions.md, "More rows never predict worse").
+        """
+        n = len(measurement)
+        out = int(np.count_nonzero(~measurement.is_in_plane))
+        if n and out * 2 < n:
+            return f"only {out} of {n} rows are out of the plane of incidence (needs half: general geometries)"
+        return None
+
+    @classmethod
     def usable_rows(cls, measurement):
         """(mask, reason): finite rows with both directions above the horizon."""
         m = measurement
