@@ -25,7 +25,8 @@ kσ (log space), averaged over a family's references per case.
 Leave-one-family-out: for each family the parameters are fitted on the other families
 and the coverage on the left-out family is reported, before and after; then they are
 fitted on all families (frozen in ``SIGMA_SCALES``).  Microflake/SGGX models are never
-used.
+used.  The dense protocol's default kind (``fibre-coord``, same σ) is then scored with
+the frozen scales, without fitting them (``dense_fibre_coord_frozen``).
 
 Alone:  python benchmarks/bench_calibrate_sigma.py  (prints JSON).
 """
@@ -53,6 +54,7 @@ from bench_prior import references  # noqa: E402
 from kesbrdf.geometry import spherical_to_cartesian  # noqa: E402
 from kesbrdf.measure.gonio import measure  # noqa: E402
 from kesbrdf.io.model_file import load_model as load  # noqa: E402
+from kesbrdf.models.base import kind_class  # noqa: E402
 from kesbrdf.models.fibre_prior import (OFF_SUPPORT_SCALE, SIGMA_SCALES, FibrePriorModel,  # noqa: E402
                                          misfit_level, support_distance, support_distance_parts, variance_parts)
 from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions  # noqa: E402
@@ -77,10 +79,13 @@ GRID_AFTER = [(a, q, b, c) for a in (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0) for q 
               for c in (0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 3.5, 4.0)]
 
 
-def cases(ref, tmp: Path) -> dict:
-    """{case: ingredients of σ} of one reference, σ from the saved-and-loaded model file."""
-    m = measure(ref, noise=NOISE, noise_floor=1e-4, rng=SEED)
-    FibrePriorModel.fit_measurement(m).save(tmp / "m.kes.json")
+def cases(ref, tmp: Path, protocol: str = "paper") -> dict:
+    """{case: ingredients of σ} of one reference, σ from the saved-and-loaded model file
+    (``fibre-prior`` on the paper protocol, ``fibre-coord`` on the dense one: each
+    protocol's default kind)."""
+    m = measure(ref, protocol=protocol, noise=NOISE, noise_floor=1e-4, rng=SEED)
+    kind = FibrePriorModel if protocol == "paper" else kind_class("fibre-coord")
+    kind.fit_measurement(m).save(tmp / "m.kes.json")
     model = load(tmp / "m.kes.json")
     held = measure(ref, orientations_deg=HELD_OUT_DEG)
     wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
@@ -184,6 +189,15 @@ def run() -> dict:
     result["coverage_frozen_references"] = {
         f"{fam}/{name}": family_coverage([ref_cases], "after", frozen)
         for fam, rows in fams.items() for name, ref_cases in zip(names[fam], rows)}
+    # the dense protocol's default (fibre-coord) with the same scales: reported, not fitted
+    dense = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for fam, refs in references().items():
+            if refs:
+                dense[fam] = [cases(ref, Path(tmp), "dense") for ref in refs.values()]
+    result["dense_fibre_coord_frozen"] = {fam: {"before": family_coverage(rows, "before", OFF_SUPPORT_SCALE),
+                                                "after": family_coverage(rows, "after", frozen)}
+                                          for fam, rows in dense.items()}
     return result
 
 

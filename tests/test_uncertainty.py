@@ -325,3 +325,28 @@ def test_uncalibrated_sigma_fails_the_bands(factor, ward_cases):
     assert not all(within_bands(c1, c2, tol=FAMILY_BAND_TOL) for c1, c2 in cov.values()), (factor, cov)
     # and the calibrated σ of the same cases is inside (the test above, one line here)
     assert all(within_bands(c1, c2, tol=FAMILY_BAND_TOL) for c1, c2 in _family_coverage(ward_cases).values())
+
+
+# s of eq. U3 (the fabric's misfit to the prior) measured by bench_calibrate_sigma:
+# Irawan twill 0.019 (the prior's own family: only the 2 % noise, RMS ≈ 0.02), Ward
+# 0.1/0.3 0.16, Sadeghi satin 0.41.  Bounds with room for the noise draw and the prior's
+# fit: twill < 0.05, Ward > 0.10, satin > 0.25 (and the order).
+MISFIT_IN_FAMILY_MAX, MISFIT_WARD_MIN, MISFIT_SATIN_MIN = 0.05, 0.10, 0.25
+
+
+def test_misfit_level_orders_the_fabrics_and_scales_the_off_support_sigma(fitted):
+    from kesbrdf.models.fibre_prior import misfit_level, off_support_variance
+
+    models = {name: load(fitted[name][2]) for name in REFERENCES}
+    s = {name: misfit_level(m) for name, m in models.items()}
+    assert s["irawan_twill"] < MISFIT_IN_FAMILY_MAX < MISFIT_WARD_MIN < s["ward_0.1_0.3"], s
+    assert s["sadeghi_satin"] > MISFIT_SATIN_MIN and s["sadeghi_satin"] > s["ward_0.1_0.3"], s
+    # the file holds everything s needs: the fitted model gives the same number
+    assert misfit_level(fitted["sadeghi_satin"][1]) == pytest.approx(s["sadeghi_satin"], rel=1e-9)
+    # off the slice (retro-reflection, θ_d = 0) and between orientations (ψ = 22.5°) the
+    # off-support variance grows with s; on the measured slice it is zero
+    wi = spherical_to_cartesian(np.radians([40.0, 40.0, 30.0]), np.radians([90.0, 22.5, 0.0]))
+    wr = spherical_to_cartesian(np.radians([40.0, 50.0, 60.0]), np.radians([90.0, 202.5, 180.0]))
+    v = {name: off_support_variance(m, wi, wr) for name, m in models.items()}
+    assert np.all(v["irawan_twill"][:2] < v["ward_0.1_0.3"][:2]) and np.all(v["ward_0.1_0.3"][:2] < v["sadeghi_satin"][:2]), v
+    assert all(x[2] == pytest.approx(0.0, abs=1e-12) for x in v.values()), v

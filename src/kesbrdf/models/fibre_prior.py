@@ -503,8 +503,8 @@ OFF_SUPPORT_SCALE = 0.60
 #: ``azimuth`` c_ψ multiplies s^q·d_ψ, q = ``azimuth_power`` (between the measured
 #: orientations the residual is interpolated, and its error grows with how far the
 #: prior is from the fabric, s); ``slice`` c₀ and ``slice_misfit`` c₁ give
-#: (c₀ + c₁ s)·d_slice off the measured slice (θ_d outside its range, γ beyond it).  Provenance: benchmarks/bench_calibrate_sigma.py,
-#: fitted on all five reference families (Irawan–Marschner and Sadeghi presets, Ward,
+#: (c₀ + c₁ s)·d_slice off the measured slice (θ_d outside its range, γ beyond it).
+#: Provenance: benchmarks/bench_calibrate_sigma.py, fitted on all five reference families (Irawan–Marschner and Sadeghi presets, Ward,
 #: Ashikhmin–Shirley, the RGL felt) at 2 % noise, paper protocol, held-out orientations
 #: and both Fig. 6 hemispheres, to land within 1σ in 60–76 % and within 2σ in 90–98 %;
 #: the leave-one-family-out fits and the coverage they give on the family left out are
@@ -652,12 +652,13 @@ def misfit_level(model: FibrePriorModel) -> float:
     the data: s is the prior's own misfit to this fabric's measurement, read back from
     the model file (no extra field).  The slice is sampled at every measured orientation
     ψ_k, in the plane of incidence, at three θ_d across the measured range and θ_i every
-    5° (θ_r = 2θ_d − θ_i, both above 5° of the horizon); logs floor at ε = 10⁻⁴·max.
+    5° (θ_r = 2θ_d − θ_i, both within 0–85°); logs floor at ε = 10⁻⁴·max.
     0 without a KES candidate or a support (then σ has no misfit-scaled terms).
     """
+    key = (id(model.kes), id(model.support))
     cached = model.__dict__.get("_misfit_level")
-    if cached is not None:
-        return cached
+    if cached is not None and cached[0] == key:
+        return cached[1]
     s = 0.0
     sup = model.support
     if model.kes is not None and sup is not None and sup.get("psi_deg"):
@@ -679,7 +680,7 @@ def misfit_level(model: FibrePriorModel) -> float:
             eps = max(float(np.nanmax(fk)), 1e-300) * 1e-4
             r = np.log(fk + eps) - np.log(fp + eps)
             s = float(np.sqrt(np.nanmean(r**2))) if np.any(np.isfinite(r)) else 0.0
-    model.__dict__["_misfit_level"] = s
+    model.__dict__["_misfit_level"] = (key, s)
     return s
 
 
