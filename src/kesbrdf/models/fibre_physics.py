@@ -63,6 +63,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError
+from kesbrdf.models.body import log_body_upper
 from kesbrdf.models.mappings import evaluate_pairs
 from kesbrdf.optics import fresnel_dielectric
 
@@ -645,7 +646,7 @@ def _start(spec: PriorSpec, d: _Data, u_half, rho, psi=(0.0, 0.0), offset=0.0, g
     ymin = np.maximum(np.percentile(np.maximum(d.y, 0), 5, axis=0), d.eps)
     yrng = np.maximum(np.max(d.y, axis=0) - ymin, d.eps)
     for c in range(spec.n_channels):
-        x[idx[f"log_kd_{c}"]] = math.log(0.8 * ymin[c])
+        x[idx[f"log_kd_{c}"]] = math.log(0.8 * ymin[c])  # clipped to eq. (B1) by the bounds
         for fam in ("warp", "weft"):
             x[idx[f"{fam}_log_ks_{c}"]] = math.log(yrng[c])
     for j, fam in enumerate(("warp", "weft")):
@@ -679,6 +680,24 @@ def _scale_ks_start(spec, x, d):
     return x
 
 
+def reading_sigma(d: _Data):
+    """The readings' standard deviations (N, C) of ``d`` (from the measurement's
+    uncertainty, as the log residual's σ carries it), or None without uncertainties."""
+    return d.sigma * (np.maximum(d.y, 0) + d.eps) if d.has_sigma else None
+
+
+def body_bounded(spec: PriorSpec, bounds, d: _Data):
+    """``bounds`` with the upper bound of every ln k_d lowered to ln c_max of the data
+    (eq. B2 of :mod:`kesbrdf.models.body`: the lobe is non-negative, so the body is at most
+    the darkest reading, up to its noise)."""
+    lo, hi = (np.array(b, float) for b in bounds)
+    idx = spec.index()
+    cols = [idx[f"log_kd_{c}"] for c in range(spec.n_channels)]
+    hi[cols] = np.minimum(hi[cols], log_body_upper(d.y, reading_sigma(d)))
+    lo[cols] = np.minimum(lo[cols], hi[cols] - 1e-6)
+    return lo, hi
+
+
 def _subsample(d: _Data, n_max: int, seed: int = 0) -> _Data:
     if d.y.shape[0] <= n_max:
         return d
@@ -687,7 +706,8 @@ def _subsample(d: _Data, n_max: int, seed: int = 0) -> _Data:
     return _Data(d.wi[pick], d.wr[pick], d.y[pick], d.eps, d.sigma[pick], d.has_sigma)
 
 
-def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None, max_nfev: int = 200) -> FibrePrior:
+def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None, max_nfev: int = 200,
+              bound_body: bool = False) -> FibrePrior:
     """Fit the prior to a :class:`~kesbrdf.measure.measurement.Measurement` (module docstring).
 
     Parameters
@@ -703,6 +723,12 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
         the θ_d = 45° slice (never in the paper protocol, where ωi·ωr = 0).
     rows : bool array, optional
         Rows to use.
+    bound_body : bool
+        Hold k_d within eq. (B2) of :mod:`kesbrdf.models.body` (at most the darkest
+        reading + 2σ); ``fibre-coord`` fits its bounded candidate with it.  The
+        ``fibre-prior`` kind fits k_d free: its parametric lobe cannot carry an in-plane
+        floor, and bounded it predicted the leave-one-family-out hemispheres worse
+        (docs/decisions.md, "The body term").
 
     Returns
     -------
@@ -745,6 +771,8 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
                 x0 = _start(spec, ds, uh, rho, psi, off)
             x0 = _scale_ks_start(spec, x0, ds)
             bounds = spec.bounds(tuple(np.sign(p) if p else 1 for p in psi))
+            if bound_body:
+                bounds = body_bounded(spec, bounds, d)
             res = _solve(spec, x0, ds, bounds, n_start)
             if best is None or res.cost < best[0].cost:
                 best = (res, bounds)
@@ -765,6 +793,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     report["seconds"] = time.perf_counter() - t0
     report["free_axes"] = bool(free_axes)
     report["free_theta_d"] = bool(free_theta_d)
+    report["body_bounded"] = bool(bound_body)
     return FibrePrior(spec, np.asarray(x, float), report, cov)
 
 

@@ -27,7 +27,8 @@ go to both.  In-plane samples cover the triangle θ_h ≤ θ_d, θ_h + θ_d = ma
 How the table is filled
 -----------------------
 1. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
-   samples used (as :func:`kesbrdf.models.kes.fit`), ``"none"`` is c = 0, a number sets c.
+   samples used (eq. B1 of :mod:`kesbrdf.models.body`, the rule every kind shares),
+   ``"none"`` is c = 0, a number sets c.
 2. Normalisation (``normalisation="bounded"``, default): the table holds
    q = (f_r − c)·w with w the foreshortening weight of :func:`kesbrdf.models.mappings.foreshortening`,
    max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)): the paper's eq. 3 quantity, as
@@ -114,6 +115,7 @@ from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
+from kesbrdf.models.body import body_value
 from kesbrdf.models.mappings import EXTRAPOLATIONS, HALFDIFF, fade, foreshortening, in_plane_half_diff, to_half_diff
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import (
@@ -462,18 +464,6 @@ def _resample_slot(theta_h, theta_d, q, H, D):
     return out.reshape(H.shape + (q.shape[1],))
 
 
-def _body(values_used, body, C):
-    if isinstance(body, str) and body == "auto":
-        return np.maximum(values_used.min(axis=0), 0.0), "auto"
-    if isinstance(body, str) and body == "none":
-        return np.zeros(C), "none"
-    try:
-        c = np.broadcast_to(np.asarray(body, float), (C,)).copy()
-    except ValueError:
-        raise KESError(f"expected body 'auto', 'none' or a number per channel, got {body!r}") from None
-    return c, "value"
-
-
 def fit_halfdiff(
     m: Measurement,
     orientations: int | None = None,
@@ -535,7 +525,7 @@ def fit_halfdiff(
     theta_h, theta_d, _ = in_plane_half_diff(m.theta_i[used], m.theta_r[used])
 
     # 1b. body term
-    c, body_mode = _body(m.values[used], body, C)
+    c, body_mode = body_value(body, m.values[used], C)  # kesbrdf.models.body, eq. B1
 
     def weight(theta_i, theta_r):
         if normalisation == "none":

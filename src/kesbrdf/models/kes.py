@@ -18,9 +18,10 @@ How the table is filled
    half-sample at deviation azimuth ψ (γ > 0) or ψ + π (γ < 0) with |γ|; at γ = 0
    both halves get the same sample (the plane of incidence, docs/method.md, "From the table to a BRDF").
 2. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
-   samples (the darkest reading is an upper bound of the diffuse floor; noise makes
-   it a slight underestimate, which only moves energy to the lobe); ``"none"`` is c = 0
-   (the paper's pure lobe); a number sets c.
+   samples (the darkest reading is an upper bound of the diffuse floor, eq. B1 of
+   :mod:`kesbrdf.models.body`, the rule every kind shares; noise makes it a slight
+   underestimate, which only moves energy to the lobe); ``"none"`` is c = 0 (the
+   paper's pure lobe); a number sets c.
 3. Noise floor: q is floored at ``noise_floor`` (default: 1e-4 × the channel's peak
    q, a 14-bit dynamic range) so that K = 1/q stays finite; every floored
    half-sample is recorded in ``diagnostics["floored"]``.
@@ -51,6 +52,7 @@ from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
+from kesbrdf.models.body import body_value
 from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
     MAPPINGS,
@@ -509,19 +511,8 @@ def fit(
     used = np.concatenate(used_rows)
     values_used = m.values[used]
 
-    # 2. body term
-    if isinstance(body, str) and body == "auto":
-        c = np.maximum(values_used.min(axis=0), 0.0)
-        body_mode = "auto"
-    elif isinstance(body, str) and body == "none":
-        c = np.zeros(C)
-        body_mode = "none"
-    else:
-        try:
-            c = np.broadcast_to(np.asarray(body, float), (C,)).copy()
-        except ValueError:
-            raise KESError(f"expected body 'auto', 'none' or a number per channel, got {body!r}") from None
-        body_mode = "value"
+    # 2. body term: the shared rule (kesbrdf.models.body, eq. B1: at most the darkest reading)
+    c, body_mode = body_value(body, values_used, C)
 
     # 3. q = f·√(cos θ_i cos θ_r) of every half-sample (body included: KES works on
     #    the measured quantity, as in the paper), floored at the noise level

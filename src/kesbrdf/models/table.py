@@ -14,7 +14,7 @@ Tabulation of a kind without a (φ, γ) table (:func:`tabulate`): the model is e
 on the paper's incidence line θ_i + θ_r = 90° (θ_i = 45° − γ/2, θ_r = 45° + γ/2, light
 at azimuth φ + π, viewer at φ), where the KES mapping (paper eq. 3–4, deviation form)
 sends the pair to exactly (φ, γ).  The body c is the smallest f_r over the grid per
-channel (clipped at 0, as the ``kes`` fit's ``body="auto"``); the table holds the lobe
+channel (clipped at 0: eq. B1 of :mod:`kesbrdf.models.body`, as the ``kes`` fit's ``body="auto"``); the table holds the lobe
 q = (f_r − c)·w(γ) with the ``bounded`` line weight w
 (:func:`kesbrdf.models.mappings.line_foreshortening`).  The table reproduces the model
 at the grid nodes of that line; off the line it is the KES mapping's reading of it,
@@ -28,6 +28,7 @@ import math
 import numpy as np
 
 from kesbrdf.errors import ModelError, where
+from kesbrdf.models.body import body_bound
 
 __all__ = [
     "lookup",
@@ -191,7 +192,7 @@ def tabulate(model, n_phi: int | None = None, n_gamma: int | None = None):
     wi, wr = in_plane_directions(psi, np.pi / 4 - gamma / 2, np.pi / 4 + gamma / 2)
     f = np.asarray(model.evaluate(wi, wr), float)
     f = np.where(np.isfinite(f), f, 0.0)
-    body = np.maximum(f.min(axis=(0, 1)), 0.0)
+    body = body_bound(f.reshape(-1, f.shape[-1]))  # kesbrdf.models.body, eq. B1
     w = line_foreshortening(gamma_grid, math.pi / 2, "bounded")
     table = np.ascontiguousarray(np.maximum(f - body, 0.0) * w[None, :, None])
     q_nodes = np.transpose(table[:: n_phi // 8], (1, 0, 2)).copy()  # (n_gamma, 8, C) at k·45°
