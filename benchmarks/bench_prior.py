@@ -10,7 +10,7 @@ For every reference of every family, measured in the paper protocol (ψ = 0, 45,
   the model FILE (saved and read back; :func:`kesbrdf.validate.uncertainty.predict_sigma`:
   candidates the pure prior and the stored KES table, θ_d law, off-support term) on
   the held-out orientations and the φ_i = 90° hemisphere (noise-free data, so the fit
-  term is ~0 and the bands are the model terms; benchmarks/calibrate_sigma.py scores
+  term is ~0 and the bands are the model terms; benchmarks/bench_calibrate_sigma.py scores
   2 % noise);
 * ``hemi90`` / ``hemi45``: NRMSE on the Fig. 6 hemispheres (light θ_i = 30°, φ_i = 90°
   or 45°; viewer on the 2.5° grid of :func:`kesbrdf.validate.compare.hemisphere_directions`);

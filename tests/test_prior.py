@@ -189,12 +189,20 @@ def test_loo_compare_reports_every_candidate():
 
 # Calibration bounds, measured on four references at 2 % noise (docs/prior.md §5): the
 # fitted-noise term alone is far too narrow (the errors are model errors), so the bands
-# rest on the candidate spread and the θ_d-law term.  They are not Gaussian: 2σ covers
+# rest on the candidate spread and the off-support terms.  They are not Gaussian: 2σ covers
 # 67–96 % (held-out orientations) and 85–99 % (hemispheres) while 1σ ranges 21–81 %.
 # Asserted: the 2σ band is not badly overconfident (≥ 60 %: the lowest measured, Sadeghi
 # satin, is 67 %) and stays informative (median σ of ln f below 0.5, a factor 1.65).
 CAL_MIN_2SIGMA = 0.60
 CAL_MAX_MEDIAN_SIGMA_LOG = 0.5
+# Off the measured slice (the φ_i = 90° hemisphere) the σ of eq. U1 grows with the
+# fabric's misfit to the prior (issue 20, docs/prior.md §5), because the errors there do:
+# on the Sadeghi satin they have median 0.3–0.4 and 90th percentile 0.9–1.3 in ln f, and
+# the band (83 % within 1σ, 98 % within 2σ on this fit) has median σ 0.79.  The
+# informative bound off the slice is 0.9 (a factor 2.5, well below the cap of 3, about
+# 10 % above the satin's); the 0.5 bound stays on the held-out orientations, where the
+# data pin the model down (as in tests/test_uncertainty.py).
+CAL_MAX_MEDIAN_SIGMA_LOG_OFF_SLICE = 0.9
 
 
 @pytest.mark.parametrize("ref", [Irawan2012("cotton_twill"), Sadeghi2013("satin")], ids=["irawan_twill", "sadeghi_satin"])
@@ -212,10 +220,11 @@ def test_uncertainty_calibration(ref):
     wr, _, _ = hemisphere_directions(5.0)
     wr = wr.reshape(-1, 3)
     wi = np.broadcast_to(spherical_to_cartesian(np.radians(30), np.radians(90)), wr.shape)
-    for case in (calibration(model, ref, held.wi, held.wr, others), calibration(model, ref, wi, wr, others)):
+    for case, bound in ((calibration(model, ref, held.wi, held.wr, others), CAL_MAX_MEDIAN_SIGMA_LOG),
+                        (calibration(model, ref, wi, wr, others), CAL_MAX_MEDIAN_SIGMA_LOG_OFF_SLICE)):
         assert case["within_2sigma"] >= CAL_MIN_2SIGMA, case
         assert case["within_1sigma"] <= case["within_2sigma"]
-        assert case["median_sigma_log"] < CAL_MAX_MEDIAN_SIGMA_LOG, case
+        assert case["median_sigma_log"] < bound, case
 
 
 def test_residual_reproduces_dense_protocol_samples():

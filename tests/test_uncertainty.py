@@ -15,31 +15,33 @@ from kesbrdf.measure.gonio import measure
 from kesbrdf.io.measurement_csv import write_measurement
 from kesbrdf.io.model_file import load_model as load
 from kesbrdf.models.fibre_prior import FibrePriorModel
-from kesbrdf.references.irawan2012 import Irawan2012
+from kesbrdf.references.irawan2012 import PRESET_NAMES as IRAWAN_PRESETS, Irawan2012
 from kesbrdf.references.sadeghi2013 import Sadeghi2013
+from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validate.uncertainty import coverage, predict_sigma
+from kesbrdf.validate.uncertainty import coverage, predict_sigma, within_bands
 from kesbrdf.validate.compare import HELD_OUT_DEG, hemisphere_directions
 
 # Calibration of the σ a model FILE carries: fit (Laplace) ⊕ spread to the pure prior
-# and to the stored KES table ⊕ θ_d law ⊕ off-support term c·d, with the one global
-# c = OFF_SUPPORT_SCALE chosen by leave-one-family-out (docs/prior.md §5).  Measured at
-# 2 % noise, paper protocol, 10° hemisphere grid, truths within 1σ / 2σ:
+# and to the stored KES table ⊕ the off-support terms scaled by the fabric's misfit to
+# the prior (eq. U1, SIGMA_SCALES chosen leave-one-family-out, docs/prior.md §5).
+# Measured at 2 % noise, paper protocol, 5° hemisphere grid, truths within 1σ / 2σ:
 #                     held-out ψ    hemisphere φ_i = 90°   φ_i = 45°
-#   Irawan twill      97 / 100 %    93 / 99 %              92 / 100 %
-#   Sadeghi satin     57 / 73 %     52 / 92 %              64 / 88 %
-#   Ward 0.1/0.3      87 / 100 %    69 / 99 %              63 / 100 %
+#   Irawan twill      56 / 94 %     72 / 95 %              67 / 93 %
+#   Sadeghi satin     56 / 72 %     76 / 97 %              75 / 94 %
+#   Ward 0.1/0.3      74 / 99 %     76 / 99 %              71 / 100 %
 # Bounds, per reference and case (n = 348–1044 held-out samples, 324 hemisphere
 # directions).  Sampling: the binomial sd of a coverage fraction at n ≈ 300 is
 # ≤ √(0.25/300) ≈ 0.03, but neighbouring directions share their errors (the error is a
 # smooth function of direction), so the effective n is tens, not hundreds: at n_eff ≈ 25
-# the 2-sd interval is ±0.19 around 0.68 and ±0.09 around 0.95.  Model slack: one
-# constant serves every family; fitted without the family tested it gives family means
-# of 0.45–0.97 at 1σ and 0.85–1.0 at 2σ (docs/prior.md §5), and single references
-# spread wider (satin's held-out orientations, 73 % at 2σ, is the worst we measured).
+# the 2-sd interval is ±0.19 around 0.68 and ±0.09 around 0.95.  Model slack: one set
+# of scales serves every family; fitted without the family tested it gives family means
+# of 0.40–0.86 at 1σ and 0.58–1.0 at 2σ (docs/prior.md §5), and single references
+# spread wider (satin's held-out orientations, 72 % at 2σ, is the worst we measured;
+# the calibration keeps every reference's held-out 2σ at ≥ 71 %).
 # Accepted: 1σ in [0.45, 0.98] (not badly overconfident; not every truth inside 1σ, which
 # would mean a uselessly wide band), 2σ ≥ 0.70 (at most 30 % misses where 5 % is ideal;
-# satin's 73 % is the binding case, honest rather than tuned away).
+# satin's 72 % is the binding case, honest rather than tuned away).
 MIN_1SIGMA, MAX_1SIGMA = 0.45, 0.98
 MIN_2SIGMA = 0.70
 TRAIN_MIN_2SIGMA = 0.95
@@ -238,3 +240,113 @@ def test_bad_support_is_one_error_naming_the_file_once(fitted, tmp_path):
     text = str(exc.value)
     assert text.count("bad.kes.json") == 1 and "support" in text and "nan" in text.lower()
     assert "\n" not in text
+
+
+# --- Issue 20: σ coverage inside its bands, per family --------------------------------
+# The σ (eq. U1, SIGMA_SCALES) was calibrated by benchmarks/bench_calibrate_sigma.py on five
+# families; this checks two of them against the issue's bands (COVERAGE_BANDS: within 1σ
+# 60–76 %, within 2σ 90–98 %), each case a family mean over its references like the
+# benchmark.  Ward (both references, ~4 s to fit each) is the fast test; the six
+# Irawan–Marschner presets (~45 s of fits) are the `slow` one.  At the frozen scales the
+# benchmark (5° hemispheres) gives Ward [1σ, 2σ] = held-out [0.70, 0.98], φ_i = 90°
+# [0.73, 0.99], 45° [0.68, 1.00]; Irawan [0.71, 0.93], [0.60, 0.90], [0.58, 0.89].  The
+# other three families are outside the bands (docs/prior.md §5).
+# Tolerance FAMILY_BAND_TOL = 0.05 each side of each band: (a) the hemispheres here are
+# the 10° grid (324 viewers) where the benchmark uses 5° (1296), which moves the family
+# means by ≤ 0.01 (measured at the frozen scales: 0.006 at most); (b) the errors are smooth in
+# direction, so of n ≈ 300–1000 truths per case only tens to a hundred are independent:
+# at n_eff ≈ 100 the binomial sd of a fraction near 0.7 is 0.046.  A σ scaled 3× (or
+# ÷ 3) moves the coverage by 0.2–0.5 and fails (test below).
+FAMILY_BAND_TOL = 0.05
+FAMILIES = {
+    "ward": {"ward_0.1_0.3": AnisotropicWard(0.1, 0.3, 0.3, 0.05),
+             "ward_0.25_0.08": AnisotropicWard(0.25, 0.08, [0.2, 0.15, 0.1], 0.1)},
+    "irawan2012": {n: Irawan2012(n) for n in IRAWAN_PRESETS},
+}
+
+
+def _cases(fitted, fam, d) -> list:
+    """[(case, f, σ_ln f, truth)] over the references of ``fam``, from saved model files."""
+    wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
+    wr = wr.reshape(-1, 3)
+    rows = []
+    for name, ref in FAMILIES[fam].items():
+        key = "irawan_twill" if name == "cotton_twill" else name
+        if key in fitted:
+            path = fitted[key][2]
+        else:
+            path = d / f"{name}.kes.json"
+            FibrePriorModel.fit_measurement(measure(ref, noise=0.02, noise_floor=1e-4, rng=3)).save(path)
+        model = load(path)
+        held = measure(ref, orientations_deg=HELD_OUT_DEG)
+        rows.append(("held_out",) + tuple(predict_sigma(model, held.wi, held.wr)[::2]) + (held.values,))
+        for phi_i in (90.0, 45.0):
+            wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(phi_i)), wr.shape)
+            rows.append((f"hemi{phi_i:g}",) + tuple(predict_sigma(model, wi, wr)[::2]) + (ref(wi, wr),))
+    return rows
+
+
+@pytest.fixture(scope="module")
+def ward_cases(fitted, tmp_path_factory):
+    return _cases(fitted, "ward", tmp_path_factory.mktemp("ward"))
+
+
+def _family_coverage(rows, sigma_factor=1.0) -> dict:
+    """{case: (mean within 1σ, mean within 2σ)} over a family's references."""
+    out = {}
+    for case in ("held_out", "hemi90", "hemi45"):
+        cov = [coverage(f, sigma_factor * sl, t) for c, f, sl, t in rows if c == case]
+        out[case] = (np.mean([c["within_1sigma"] for c in cov]), np.mean([c["within_2sigma"] for c in cov]))
+    return out
+
+
+def _assert_in_bands(family, rows):
+    for case, (c1, c2) in _family_coverage(rows).items():
+        assert within_bands(c1, c2, tol=FAMILY_BAND_TOL), (family, case, c1, c2)
+
+
+def test_sigma_coverage_inside_its_bands_ward(ward_cases):
+    """Issue 20: within 1σ 60–76 %, within 2σ 90–98 % of held-out truths, on the held-out
+    orientations and both hemispheres (± FAMILY_BAND_TOL), Ward family."""
+    _assert_in_bands("ward", ward_cases)
+
+
+@pytest.mark.slow
+def test_sigma_coverage_inside_its_bands_irawan(fitted, tmp_path):
+    """The same bands on the six Irawan–Marschner presets (slow: five more fits)."""
+    _assert_in_bands("irawan2012", _cases(fitted, "irawan2012", tmp_path))
+
+
+@pytest.mark.parametrize("factor", [3.0, 1 / 3.0])
+def test_uncalibrated_sigma_fails_the_bands(factor, ward_cases):
+    """The band check can fail: the same σ scaled 3× (too wide) or ÷ 3 (too narrow)
+    leaves the bands on some case."""
+    cov = _family_coverage(ward_cases, factor)
+    assert not all(within_bands(c1, c2, tol=FAMILY_BAND_TOL) for c1, c2 in cov.values()), (factor, cov)
+    # and the calibrated σ of the same cases is inside (the test above, one line here)
+    assert all(within_bands(c1, c2, tol=FAMILY_BAND_TOL) for c1, c2 in _family_coverage(ward_cases).values())
+
+
+# s of eq. U3 (the fabric's misfit to the prior) measured by bench_calibrate_sigma:
+# Irawan twill 0.019 (the prior's own family: only the 2 % noise, RMS ≈ 0.02), Ward
+# 0.1/0.3 0.16, Sadeghi satin 0.41.  Bounds with room for the noise draw and the prior's
+# fit: twill < 0.05, Ward > 0.10, satin > 0.25 (and the order).
+MISFIT_IN_FAMILY_MAX, MISFIT_WARD_MIN, MISFIT_SATIN_MIN = 0.05, 0.10, 0.25
+
+
+def test_misfit_level_orders_the_fabrics_and_scales_the_off_support_sigma(fitted):
+    from kesbrdf.models.fibre_prior import misfit_level, off_support_variance
+
+    models = {name: load(fitted[name][2]) for name in REFERENCES}
+    s = {name: misfit_level(m) for name, m in models.items()}
+    assert s["irawan_twill"] < MISFIT_IN_FAMILY_MAX < MISFIT_WARD_MIN < s["ward_0.1_0.3"], s
+    assert s["sadeghi_satin"] > MISFIT_SATIN_MIN and s["sadeghi_satin"] > s["ward_0.1_0.3"], s
+    # the file holds everything s needs: the fitted model gives the same number
+    assert misfit_level(fitted["sadeghi_satin"][1]) == pytest.approx(s["sadeghi_satin"], rel=1e-9)
+    # off the slice (retro-reflection, θ_d = 0) and between orientations (ψ = 22.5°) the
+    # off-support variance grows with s; on the measured slice it is zero
+    wi = spherical_to_cartesian(np.radians([40.0, 40.0, 30.0]), np.radians([90.0, 22.5, 0.0]))
+    wr = spherical_to_cartesian(np.radians([40.0, 50.0, 60.0]), np.radians([90.0, 202.5, 180.0]))
+    v = {name: off_support_variance(m, wi, wr) for name, m in models.items()}
+    assert np.all(v["irawan_twill"][:2] < v["ward_0.1_0.3"][:2]) and np.all(v["ward_0.1_0.3"][:2] < v["sadeghi_satin"][:2]), v
+    assert all(x[2] == pytest.approx(0.0, abs=1e-12) for x in v.values()), v

@@ -55,7 +55,7 @@ from kesbrdf.models.table import lookup
 from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
 from kesbrdf.optics import fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "measured_support", "support_distance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
+__all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "SIGMA_SCALES", "measured_support", "support_distance", "support_distance_parts", "misfit_level", "variance_parts", "off_support_variance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
@@ -493,24 +493,34 @@ fit_kes_candidate = _fit_kes_candidate
 MAX_SIGMA_LOG = 3.0
 
 
-#: Scale c of the off-support term σ_off = c·d (eq. U2, σ of ln f per radian of distance
-#: from the measured data).  Provenance: leave-one-family-out over the five reference
-#: families of :mod:`kesbrdf.references` (Irawan–Marschner and Sadeghi presets, Ward,
-#: Ashikhmin–Shirley, the RGL felt; benchmarks/calibrate_sigma.py), 2 % noise, paper
-#: protocol, held-out orientations and both Fig. 6 hemispheres.  The constants fitted
-#: without each family were 0.47–1.19 (docs/prior.md §5 gives the coverage they give on
-#: the family left out); 0.60 is the one fitted on all families at once (2026-12-02).
+#: Scale c of the earlier one-constant off-support term σ_off = c·d (eq. U2, σ of ln f
+#: per radian), with the θ_d-law term: the σ before the misfit-scaled terms (eq. U1′),
+#: kept for ``off_support_scale=`` and as the "before" of benchmarks/bench_calibrate_sigma.py.
+#: Leave-one-family-out it left every family outside the coverage bands (docs/prior.md §5).
 OFF_SUPPORT_SCALE = 0.60
 
+#: Scales of the off-support terms of eq. (U1) (σ of ln f per radian of distance):
+#: ``azimuth`` c_ψ multiplies s^q·d_ψ, q = ``azimuth_power`` (between the measured
+#: orientations the residual is interpolated, and its error grows with how far the
+#: prior is from the fabric, s); ``slice`` c₀ and ``slice_misfit`` c₁ give
+#: (c₀ + c₁ s)·d_slice off the measured slice (θ_d outside its range, γ beyond it).
+#: Provenance: benchmarks/bench_calibrate_sigma.py, fitted on all five reference families (Irawan–Marschner and Sadeghi presets, Ward,
+#: Ashikhmin–Shirley, the RGL felt) at 2 % noise, paper protocol, held-out orientations
+#: and both Fig. 6 hemispheres, to land within 1σ in 60–76 % and within 2σ in 90–98 %;
+#: the leave-one-family-out fits and the coverage they give on the family left out are
+#: in docs/prior.md §5 (2026-12-03).
+SIGMA_SCALES = {"azimuth": 1.0, "azimuth_power": 0.75, "slice": 0.30, "slice_misfit": 3.0}
 
-def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_support_scale=None):
-    r"""Prediction and a per-prediction σ: fit noise (Laplace) ⊕ model term ⊕ off-support term.
+
+def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_support_scale=None, scales=None):
+    r"""Prediction and a per-prediction σ: fit noise (Laplace) ⊕ model spread ⊕ off-support terms.
 
     .. math::
 
         \sigma_{\ln f}^2 = g^\top \Sigma_\theta\, g
             \;+\; \frac{1}{K}\sum_k (\ln f_k - \ln f)^2
-            \;+\; (w_s \ln\Phi(\theta_d))^2 \;+\; (c\, d)^2        \qquad (U1)
+            \;+\; (c_\psi\, s^q\, d_\psi)^2
+            \;+\; \bigl((c_0 + c_1 s)\, d_\text{slice}\bigr)^2        \qquad (U1)
 
     * fit: g = ∂ ln f_prior/∂θ (:meth:`FibrePrior.log_jacobian`) and Σ_θ the Laplace
       covariance of the prior's fit;
@@ -518,18 +528,26 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_supp
       residual, or the pure prior) and the other candidates f_k: the pure prior (when
       the model has a residual), the KES table fitted to the same samples (stored in
       the file, :attr:`FibrePriorModel.kes`) and every callable in ``others``;
-    * θ_d law (one θ_d slice, the paper protocol): the spread between the default
-      Fresnel law and none, w_s = (f_prior − k_d)/f_prior the specular fraction; zero
-      on the measured slice θ_d = 45°;
-    * off support: d the distance from the measured data (:func:`support_distance`,
-      eq. U2: θ_d outside the measured θ_d range, γ beyond the largest measured
-      deviation, and sin θ_i times the light's azimuth gap to the nearest measured
-      orientation ψ_k, mod 180°), c = ``off_support_scale`` (default :data:`OFF_SUPPORT_SCALE`, one
-      global constant chosen by leave-one-family-out, docs/prior.md §5).
+    * s, the fabric's own misfit to the prior (:func:`misfit_level`, eq. U3: RMS of
+      ln(f_KES/f_prior) on the measured slice), read from the file;
+    * between orientations: d_ψ = sin θ_i times the light's azimuth gap to the nearest
+      measured orientation ψ_k, mod 180° (:func:`support_distance_parts`); the residual
+      that carries the fabric's departure from the prior is interpolated there, so the
+      term grows with s (as s^q, q = ¾: the held-out errors of well-fitted fabrics sit
+      near the noise, not in proportion to s);
+    * off the measured slice: d_slice, θ_d outside the measured θ_d range and γ beyond
+      the largest measured deviation; a floor c₀ (the prior's θ_d/γ extrapolation is
+      never exact) plus c₁ s.
+
+    c_ψ, q, c₀, c₁ are :data:`SIGMA_SCALES` (``scales`` overrides), chosen by
+    leave-one-family-out calibration (docs/prior.md §5).  ``off_support_scale=c`` gives
+    the earlier σ instead (eq. U1′: fit + spread + the θ_d-law term (w_s ln Φ(θ_d))² +
+    (c·d)², d of :func:`support_distance`).
 
     Logs use ε = 10⁻⁴·max f so dark regions do not dominate.  A model read from a file
-    written before the KES candidate and the support were stored lacks those two terms
-    (its diagnostics say so).
+    written before the KES candidate and the support were stored lacks the spread to it
+    and the off-support terms and keeps the θ_d-law term of eq. (U1′) (its diagnostics
+    say so).
 
     Returns
     -------
@@ -544,23 +562,47 @@ def predict_with_uncertainty(model: FibrePriorModel, wi, wr, others=(), off_supp
     wr = np.asarray(wr, float).reshape(-1, 3)
     wi, wr = np.broadcast_arrays(wi, wr)
     f = model.evaluate(wi, wr)
-    var = _variance_terms(model, wi, wr, f, others)
-    if model.support is not None:
-        c = OFF_SUPPORT_SCALE if off_support_scale is None else off_support_scale
-        var = var + (c * support_distance(model.support, wi, wr))[:, None] ** 2
+    if off_support_scale is not None:
+        var = _variance_terms(model, wi, wr, f, others)
+        if model.support is not None:
+            var = var + (off_support_scale * support_distance(model.support, wi, wr))[:, None] ** 2
+    else:
+        parts = variance_parts(model, wi, wr, f, others)
+        var = parts["fit"] + parts["spread"]
+        if model.support is not None:
+            var = var + off_support_variance(model, wi, wr, scales)[:, None]
+        else:  # files without the support: the θ_d-law term is their only off-slice growth
+            var = var + parts["theta_d_law"]
     sigma_log = np.minimum(np.sqrt(np.maximum(var, 0)), MAX_SIGMA_LOG)
     return f, f * sigma_log, sigma_log
 
 
+def off_support_variance(model: FibrePriorModel, wi, wr, scales=None) -> np.ndarray:
+    """(c_ψ s^q d_ψ)² + ((c₀ + c₁ s) d_slice)² of eq. (U1), shape (N,)."""
+    k = dict(SIGMA_SCALES, **(scales or {}))
+    s = misfit_level(model)
+    d_slice, d_psi = support_distance_parts(model.support, wi, wr)
+    return (k["azimuth"] * s ** k["azimuth_power"] * d_psi) ** 2 + ((k["slice"] + k["slice_misfit"] * s) * d_slice) ** 2
+
+
 def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
-    """Fit + spread + θ_d-law terms of eq. (U1), shape (N, C)."""
+    """Fit + spread + θ_d-law terms of eq. (U1′), shape (N, C) (the σ of files before the
+    calibrated off-support term; :func:`variance_parts` gives them one by one)."""
+    parts = variance_parts(model, wi, wr, f, others)
+    return parts["fit"] + parts["spread"] + parts["theta_d_law"]
+
+
+def variance_parts(model: FibrePriorModel, wi, wr, f, others=()) -> dict:
+    """The terms of eq. (U1) that do not depend on the distance from the support, each
+    of shape (N, C): ``fit`` (Laplace), ``spread`` (candidates) and ``theta_d_law``."""
     eps = max(float(np.nanmax(f)), 1e-300) * 1e-4
-    var = np.zeros_like(f)
+    fit = np.zeros_like(f)
     prior = model.prior
     above = (wi[:, 2] > 0) & (wr[:, 2] > 0)
     if prior.cov is not None and above.any():
         g = prior.log_jacobian(wi[above], wr[above])  # (n, C, P)
-        var[above] = np.einsum("ncp,pq,ncq->nc", g, prior.cov, g)
+        fit[above] = np.einsum("ncp,pq,ncq->nc", g, prior.cov, g)
+    spread = np.zeros_like(f)
     cands = list(others)
     if model.residual is not None:
         cands.append(prior)
@@ -568,8 +610,8 @@ def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
         cands.append(model.kes.evaluate)
     if cands:
         lf = np.log(f + eps)
-        spread = [(np.log(np.maximum(np.asarray(c(wi, wr), float), 0) + eps) - lf) ** 2 for c in cands]
-        var = var + np.mean(spread, axis=0)
+        spread = np.mean([(np.log(np.maximum(np.asarray(c(wi, wr), float), 0) + eps) - lf) ** 2 for c in cands], axis=0)
+    law = np.zeros_like(f)
     if not prior.spec.free_theta_d:
         # θ_d law not identified by the data (one θ_d slice): the spread between the
         # default Fresnel law and no θ_d dependence at all, on the specular fraction
@@ -579,8 +621,67 @@ def _variance_terms(model: FibrePriorModel, wi, wr, f, others=()):
         fp = prior(wi, wr)
         kd = np.exp([prior.parameters()[f"log_kd_{c}"] for c in range(prior.spec.n_channels)])
         spec_frac = np.clip((fp - kd) / np.maximum(fp, 1e-300), 0.0, 1.0)
-        var = var + (spec_frac * log_phi[:, None]) ** 2
-    return var
+        law = (spec_frac * log_phi[:, None]) ** 2
+    return {"fit": fit, "spread": spread, "theta_d_law": law}
+
+
+def support_distance_parts(support: dict, wi, wr):
+    """(d_slice, d_ψ) of eq. (U2), radians: the distance off the measured slice (θ_d
+    outside its range, γ beyond the largest deviation) and sin θ_i times the light's
+    azimuth gap to the nearest measured orientation (0 without ``psi_deg``)."""
+    wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
+    lo, hi = np.radians(support["theta_d_deg"])
+    td = _theta_d(wi, wr)
+    _, gamma = to_phi_gamma(wi, wr, "deviation")
+    d_td = np.maximum(lo - td, 0.0) + np.maximum(td - hi, 0.0)
+    d_g = np.maximum(gamma - math.radians(support["gamma_max_deg"]), 0.0)
+    d_psi = np.zeros_like(td)
+    psi = np.radians(np.asarray(support.get("psi_deg", []), float))
+    if psi.size:
+        phi_i = np.arctan2(wi[..., 1], wi[..., 0])
+        gap = np.abs((phi_i[..., None] - psi + np.pi / 2) % np.pi - np.pi / 2).min(axis=-1)
+        d_psi = np.sqrt(np.clip(1.0 - wi[..., 2] ** 2, 0.0, 1.0)) * gap
+    return np.sqrt(d_td**2 + d_g**2), d_psi
+
+
+def misfit_level(model: FibrePriorModel) -> float:
+    r"""s: how far the fabric is from the prior, the RMS of ln(f_KES / f_prior) on the
+    measured slice (eq. U3).
+
+    The KES candidate reproduces the measured samples, so on the slice it stands for
+    the data: s is the prior's own misfit to this fabric's measurement, read back from
+    the model file (no extra field).  The slice is sampled at every measured orientation
+    ψ_k, in the plane of incidence, at three θ_d across the measured range and θ_i every
+    5° (θ_r = 2θ_d − θ_i, both within 0–85°); logs floor at ε = 10⁻⁴·max.
+    0 without a KES candidate or a support (then σ has no misfit-scaled terms).
+    """
+    key = (id(model.kes), id(model.support))
+    cached = model.__dict__.get("_misfit_level")
+    if cached is not None and cached[0] == key:
+        return cached[1]
+    s = 0.0
+    sup = model.support
+    if model.kes is not None and sup is not None and sup.get("psi_deg"):
+        lo, hi = sup["theta_d_deg"]
+        wi, wr = [], []
+        for psi in np.radians(sup["psi_deg"]):
+            for td in np.radians(np.linspace(lo, hi, 3)):
+                ti = np.radians(np.arange(0.0, 86.0, 5.0))
+                tr = 2.0 * td - ti
+                ok = (tr >= 0) & (tr <= np.radians(85.0))
+                ti, tr = ti[ok], tr[ok]
+                c, s_ = np.cos(psi), np.sin(psi)
+                wi.append(np.stack([np.sin(ti) * c, np.sin(ti) * s_, np.cos(ti)], -1))
+                wr.append(np.stack([-np.sin(tr) * c, -np.sin(tr) * s_, np.cos(tr)], -1))
+        wi, wr = np.concatenate(wi), np.concatenate(wr)
+        if wi.size:
+            fk = np.maximum(np.asarray(model.kes.evaluate(wi, wr), float), 0)
+            fp = np.maximum(np.asarray(model.scaled_prior(wi, wr), float), 0)
+            eps = max(float(np.nanmax(fk)), 1e-300) * 1e-4
+            r = np.log(fk + eps) - np.log(fp + eps)
+            s = float(np.sqrt(np.nanmean(r**2))) if np.any(np.isfinite(r)) else 0.0
+    model.__dict__["_misfit_level"] = (key, s)
+    return s
 
 
 def calibration(model: FibrePriorModel, reference, wi, wr, others=()) -> dict:

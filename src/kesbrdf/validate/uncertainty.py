@@ -10,6 +10,7 @@ docs/prior.md §5).  A ``kes`` / ``kes-halfdiff`` table interpolates the measure
 exactly; the file holds no noise estimate and no second candidate, so any σ computed
 from it alone would be invented.  Asking for one is a :class:`~kesbrdf.errors.ModelError`
 that says so (decision recorded in docs/prior.md, "Uncertainty of other kinds").
+``fibre-coord`` (the dense default) inherits the same σ.
 """
 
 from __future__ import annotations
@@ -18,7 +19,11 @@ import numpy as np
 
 from kesbrdf.errors import ModelError
 
-__all__ = ["has_uncertainty", "predict_sigma", "coverage"]
+__all__ = ["has_uncertainty", "predict_sigma", "coverage", "COVERAGE_BANDS", "within_bands"]
+
+#: The coverage a calibrated σ must give on held-out truths (issue 20): within 1σ
+#: 60–76 % and within 2σ 90–98 % (a Gaussian gives 68.3 % and 95.4 %).
+COVERAGE_BANDS = ((0.60, 0.76), (0.90, 0.98))
 
 
 def has_uncertainty(model) -> bool:
@@ -31,11 +36,14 @@ def predict_sigma(model, wi, wr, source: str = "model"):
 
     For the ``fibre-prior`` kind, σ of ln f combines the fit noise propagated through the
     Laplace covariance, the spread between the candidates (the model, its pure prior and
-    the stored KES table), the θ_d-law term and the off-support term, eq. (U1) of
+    the stored KES table) and the off-support terms (between the measured orientations
+    and off the measured slice), eq. (U1) of
     :func:`kesbrdf.models.fibre_prior.predict_with_uncertainty` (docs/prior.md §5):
 
     .. math:: \sigma_{\ln f}^2 = g^\top\Sigma_\theta g + \tfrac1K\sum_k(\ln f_k-\ln f)^2
-              + (w_s\ln\Phi)^2 + (c\,d)^2
+              + (c_\psi s^q d_\psi)^2 + ((c_0 + c_1 s)\,d_\text{slice})^2
+
+    with s the fabric's own misfit to the prior on the measured slice.
 
     Parameters
     ----------
@@ -80,3 +88,10 @@ def coverage(pred, sigma_log, truth) -> dict:
     z = np.abs(np.log(np.maximum(t, 0) + eps) - np.log(np.maximum(p, 0) + eps)) / np.maximum(sl, 1e-12)
     return {"within_1sigma": float(np.mean(z <= 1)), "within_2sigma": float(np.mean(z <= 2)),
             "median_sigma_log": float(np.median(sl)), "n": int(z.size)}
+
+
+def within_bands(within_1sigma: float, within_2sigma: float, tol: float = 0.0, bands=COVERAGE_BANDS) -> bool:
+    """True when the two coverage fractions lie in :data:`COVERAGE_BANDS`, each band
+    widened by ``tol`` on both sides (the finite-sample slack of the caller)."""
+    (lo1, hi1), (lo2, hi2) = bands
+    return lo1 - tol <= within_1sigma <= hi1 + tol and lo2 - tol <= within_2sigma <= hi2 + tol
