@@ -154,6 +154,7 @@ def test_auto_compares_with_the_prior_on_held_out_orientations(ward_auto):
     assert kesbrdf.fit(m, orientations=3)[1].comparison is None
 
 
+@pytest.mark.slow  # 35 s: five-fold prior fits on 205 CUReT samples (make test-long)
 def test_auto_on_scattered_data_keeps_the_better_in_five_fold_validation():
     from pathlib import Path
 

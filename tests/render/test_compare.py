@@ -134,6 +134,10 @@ def test_demo_comparisons_step(render_module, tmp_path, monkeypatch):
 
     tiny = compare.default_options
     monkeypatch.setattr(compare, "default_options", lambda **kw: tiny(**{**kw, "spp": 8, "resolution": (48, 36)}))
+    # the step's shape, with the quick KES fits: that the panels fit by kesbrdf fit's rule is
+    # test_compare_render_fits_by_kesbrdf_fits_rule_unless_a_kind_is_given (20 s saved here)
+    spec = compare.fit_spec
+    monkeypatch.setattr(compare, "fit_spec", lambda protocol, model="default": spec(protocol, "kes"))
 
     said = []
     out = _comparisons(tmp_path, AnisotropicWard(0.08, 0.22), said.append)
