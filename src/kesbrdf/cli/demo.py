@@ -382,12 +382,15 @@ def run(args) -> int:
         write_text(out / "validation.json", json.dumps(summary, indent=1, default=str) + "\n")
         plan_result = _demo_prior.small_plan(reference, say)
 
-    comparisons = [] if args.quick else _attempt("reference-vs-model renders",
-                                                 lambda: _comparisons(out, reference, say, early_compare), notes, [])
     looks = None
     if not args.quick:
         exported = _attempt("exports", lambda: _exports(out, fitted, say, notes), notes, {})
         looks = _attempt("export looks", lambda: _looks(out, model_path, exported, say), notes)
+    # collected after the exports and looks: the background comparison fits its own default
+    # models (a dense fibre-coord fit is ~30 CPU s), and waiting for it earlier left this
+    # process idle (50 s at the plan step, measured)
+    comparisons = [] if args.quick else _attempt("reference-vs-model renders",
+                                                 lambda: _comparisons(out, reference, say, early_compare), notes, [])
 
     # figures + report
     if _have("matplotlib") and _have("kesbrdf.plotting.report"):
