@@ -414,22 +414,11 @@ def support_distance(support: dict, wi, wr) -> np.ndarray:
     θ_d outside the measured θ_d range, γ beyond the largest measured deviation, and the
     light's azimuth from the nearest measured orientation ψ_k (mod 180°, as arc length:
     the azimuth does not matter at normal incidence).  A support without ``psi_deg``
-    (written before it was stored) has no azimuth term.
+    (written before it was stored) has no azimuth term.  The two parts separately:
+    :func:`support_distance_parts`.
     """
-    wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
-    lo, hi = np.radians(support["theta_d_deg"])
-    td = _theta_d(wi, wr)
-    _, gamma = to_phi_gamma(wi, wr, "deviation")
-    d_td = np.maximum(lo - td, 0.0) + np.maximum(td - hi, 0.0)
-    d_g = np.maximum(gamma - math.radians(support["gamma_max_deg"]), 0.0)
-    d2 = d_td**2 + d_g**2
-    psi = np.radians(np.asarray(support.get("psi_deg", []), float))
-    if psi.size:
-        phi_i = np.arctan2(wi[..., 1], wi[..., 0])
-        gap = np.abs((phi_i[..., None] - psi + np.pi / 2) % np.pi - np.pi / 2).min(axis=-1)
-        sin_ti = np.sqrt(np.clip(1.0 - wi[..., 2] ** 2, 0.0, 1.0))
-        d2 = d2 + (sin_ti * gap) ** 2
-    return np.sqrt(d2)
+    d_slice, d_psi = support_distance_parts(support, wi, wr)
+    return np.hypot(d_slice, d_psi)
 
 
 def ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
