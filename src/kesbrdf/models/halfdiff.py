@@ -347,6 +347,8 @@ def table_coverage(m: Measurement, orientations=None) -> float:
     H, D = np.meshgrid(_uniform_grid(theta_max / 2, step), _uniform_grid(theta_max, step), indexing="ij")
     inside = (H <= D + ANGLE_TOL) & (H + D <= theta_max + ANGLE_TOL)
     nodes = np.stack([H[inside], D[inside]], axis=-1)
+    from scipy.spatial import cKDTree
+
     worst = 1.0
     for r in rows:
         th, td, upper = in_plane_half_diff(m.theta_i[r], m.theta_r[r])
@@ -355,11 +357,8 @@ def table_coverage(m: Measurement, orientations=None) -> float:
             points = np.stack([th[sel], td[sel]], axis=-1)
             if not points.size:
                 return 0.0
-            near = np.zeros(len(nodes), bool)
-            for chunk in np.array_split(np.arange(len(points)), max(1, len(points) // 256)):
-                d = np.linalg.norm(nodes[:, None, :] - points[None, chunk, :], axis=-1)
-                near |= np.any(d <= 1.5 * step, axis=1)
-            worst = min(worst, float(np.mean(near)))
+            nearest, _ = cKDTree(points).query(nodes)  # each node's nearest sample
+            worst = min(worst, float(np.mean(nearest <= 1.5 * step)))
     return worst
 
 
