@@ -275,6 +275,22 @@ def _filament_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):
     return u, cphi, A_bar / (norm_sum * jac)
 
 
+def _staple_base(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):
+    """The twist-free part of :func:`_staple_geometry` for one frame (cached per family and offset).
+
+    A = h'_y sin u + h'_z cos u, B = h'_y cos u − h'_z sin u, √(h'_x² + A²) and
+    atan2(−A, h'_x) on the tilt nodes u, with the frame's components broadcast to (K, N, 1).
+    """
+    u = _U_NODES
+    su, cu = np.sin(u), np.cos(u)
+    e = lambda a: a[..., None]  # noqa: E731  (K, N) -> (K, N, 1)
+    A = e(hy) * su + e(hz) * cu
+    Bq = e(hy) * cu - e(hz) * su
+    root = np.sqrt(e(hx) ** 2 + A * A)
+    v0 = np.arctan2(-A, e(hx))
+    return (su, cu, Bq, root, v0, e(hx), e(hy), e(hz), (e(ix), e(iy), e(iz)), (e(rx), e(ry), e(rz)), e(norm_sum))
+
+
 def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
     """ψ-dependent part of a staple family: (G, cos φ, ∂G/∂ψ, ∂cos φ/∂ψ), each (K, N, U).
 
@@ -284,40 +300,43 @@ def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
     t = t(v*, ψ) through both arguments; the validity mask is held fixed (its edges are
     jumps of S, not part of the derivative).
     """
-    u = _U_NODES
-    su, cu = np.sin(u), np.cos(u)
+    return _staple_psi(_staple_base(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum), psi)
+
+
+def _staple_psi(base, psi):
+    """:func:`_staple_geometry` from the frame's :func:`_staple_base` (the fit evaluates many ψ on one frame)."""
+    su, cu, Bq, root, v0, hx, hy, hz, wi_, wr_, ns = base
+    ix, iy, iz = wi_
+    rx, ry, rz = wr_
     e = lambda a: a[..., None]  # noqa: E731  (K, N) -> (K, N, 1)
-    A = e(hy) * su + e(hz) * cu
-    Bq = e(hy) * cu - e(hz) * su
     tpsi = e(np.tan(psi))
     with np.errstate(invalid="ignore", divide="ignore"):
-        D = Bq / (np.sqrt(e(hx) ** 2 + A * A) * tpsi)
+        D = Bq / (root * tpsi)
     ok = np.abs(D) < 1.0
-    v = np.arctan2(-A, e(hx)) + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
+    v = v0 + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
     v = np.where(v > np.pi, v - 2 * np.pi, v)  # the same point in (−π, π] (irawan2012: v* wrap)
     ok &= np.abs(v) < np.pi / 2
     sv, cv = np.sin(v), np.cos(v)
     nx, ny, nz = sv, su * cv, cu * cv
-    ci = nx * e(ix) + ny * e(iy) + nz * e(iz)
-    cr = nx * e(rx) + ny * e(ry) + nz * e(rz)
-    nh = np.abs(nx * e(hx) + ny * e(hy) + nz * e(hz))
+    ci = nx * ix + ny * iy + nz * iz
+    cr = nx * rx + ny * ry + nz * rz
+    nh_signed = nx * hx + ny * hy + nz * hz
+    nh = np.abs(nh_signed)
     sp, cp = e(np.sin(psi)), e(np.cos(psi))
     tx = -cv * sp
     ty = cu * cp + su * sv * sp
     tz = -su * cp + cu * sv * sp
-    wi_, wr_ = (e(ix), e(iy), e(iz)), (e(rx), e(ry), e(rz))
     cphi = _cos_phi(*wi_, *wr_, tx, ty, tz)
     AS = _seeliger(ci, cr)
     nhf = np.maximum(nh, 1e-9)
-    scale = 1.0 / (e(norm_sum) * np.abs(sp))
+    scale = 1.0 / (ns * np.abs(sp))
     with np.errstate(invalid="ignore", divide="ignore"):
         G = np.where(ok, AS / nhf, 0.0) * scale
         dv = np.where(ok, D / (np.sqrt(np.maximum(1.0 - D * D, 1e-300)) * sp * cp), 0.0)
         dnx, dny, dnz = cv * dv, -su * sv * dv, -cu * sv * dv
-        dci = dnx * e(ix) + dny * e(iy) + dnz * e(iz)
-        dcr = dnx * e(rx) + dny * e(ry) + dnz * e(rz)
-        nh_signed = nx * e(hx) + ny * e(hy) + nz * e(hz)
-        dnh = np.where(nh > 1e-9, np.sign(nh_signed) * (dnx * e(hx) + dny * e(hy) + dnz * e(hz)), 0.0)
+        dci = dnx * ix + dny * iy + dnz * iz
+        dcr = dnx * rx + dny * ry + dnz * rz
+        dnh = np.where(nh > 1e-9, np.sign(nh_signed) * (dnx * hx + dny * hy + dnz * hz), 0.0)
         pos = (ci > 0) & (cr > 0)
         dAS = np.where(pos, (cr * cr * dci + ci * ci * dcr) / np.where(pos, (ci + cr) ** 2, 1.0), 0.0)
         dG = np.where(ok, dAS / nhf - AS * dnh / (nhf * nhf), 0.0) * scale - G * (cp / sp)
@@ -326,6 +345,16 @@ def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
           su * sp + cu * sv * cp + cu * cv * sp * dv)
     dcphi = _cos_phi_derivative(wi_, wr_, (tx, ty, tz), dt)
     return G, cphi, dG, np.where(ok, dcphi, 0.0)
+
+
+def _staple_cached(cache, fam, alpha, offset, psi, h, wi, wr, norm_sum):
+    """:func:`_staple_geometry` of one family at one (δ, ψ) (K = 1), its ψ-free base cached per (family, δ)."""
+    def compute():
+        base = _cached(cache, ("stb", fam, offset), lambda: _staple_base(
+            *(q[None] for q in _frames(h, wi, wr, alpha + offset)), norm_sum[None]))
+        return _staple_psi(base, np.array([[psi]]))
+
+    return _cached(cache, ("sta", fam, offset, psi), compute)
 
 
 def _staple_combine(G, cphi, lo, hi, log_s, c2, rho):
@@ -402,9 +431,7 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
             # the expensive geometry depends only on (δ, ψ): evaluate it once per distinct pair
             key = np.column_stack([offset, col(f"{fam}_psi")[:, 0]])
             uniq, inv = np.unique(key, axis=0, return_inverse=True)
-            parts = [_cached(cache, ("sta", fam, float(o), float(p)),
-                             lambda o=o, p=p: _staple_geometry(*(q[None] for q in _frames(h, wi, wr, alpha + o)), norm_sum[None], np.array([[p]])))
-                     for o, p in uniq]
+            parts = [_staple_cached(cache, fam, alpha, float(o), float(p), h, wi, wr, norm_sum) for o, p in uniq]
             inv = np.asarray(inv).reshape(-1)
             G = np.concatenate([q[0] for q in parts])[inv]
             cphi = np.concatenate([q[1] for q in parts])[inv]
@@ -472,10 +499,8 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
         else:
             psi = t(f"{fam}_psi")
             shape_cols.append(idx[f"{fam}_psi"])
-            G, cphi, dG, dcphi = (a[0] for a in _cached(  # (N, U) each
-                cache, ("sta", fam, float(offset), float(psi)),
-                lambda: _staple_geometry(*(q[None] for q in _frames(h, wi, wr, alpha + offset)),
-                                         norm_sum[None], np.array([[psi]]))))
+            G, cphi, dG, dcphi = (a[0] for a in _staple_cached(  # (N, U) each
+                cache, fam, alpha, float(offset), float(psi), h, wi, wr, norm_sum))
             P, dP = _profile_derivatives(_U_NODES, lo, hi, log_s, c2)  # (U,), (4, U)
             Nl = _lobe_rho(cphi, rho)
             NG = Nl * G
