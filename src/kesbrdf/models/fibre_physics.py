@@ -54,6 +54,7 @@ docs/results.md, "prior".
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections import ChainMap
@@ -118,6 +119,12 @@ class PriorSpec:
     free_theta_d: bool = False
 
     def names(self) -> list[str]:
+        return list(_spec_names(self))
+
+    def index(self) -> dict:
+        return dict(_spec_index(self))
+
+    def _names(self) -> list[str]:
         C = self.n_channels
         out = [f"log_kd_{c}" for c in range(C)]
         for fam, kind in zip(("warp", "weft"), self.kinds):
@@ -130,9 +137,6 @@ class PriorSpec:
         if self.free_theta_d:
             out += ["d1", "d2"]
         return out
-
-    def index(self) -> dict:
-        return {n: i for i, n in enumerate(self.names())}
 
     def bounds(self, psi_sign=None):
         lo, hi = [], []
@@ -161,6 +165,17 @@ class PriorSpec:
             lo.append(a)
             hi.append(b)
         return np.array(lo), np.array(hi)
+
+
+@functools.lru_cache(maxsize=64)
+def _spec_names(spec: PriorSpec) -> tuple:
+    """The parameter names of a spec, built once (evaluate_batch asks on every call of a fit)."""
+    return tuple(spec._names())
+
+
+@functools.lru_cache(maxsize=64)
+def _spec_index(spec: PriorSpec) -> dict:
+    return {n: i for i, n in enumerate(_spec_names(spec))}
 
 
 def _sigmoid(x):
@@ -406,7 +421,7 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
     each family per axis offset (and twist, for staple families) between calls.
     """
     theta = np.atleast_2d(np.asarray(theta, float))
-    idx = spec.index()
+    idx = _spec_index(spec)
     C = spec.n_channels
     B = theta.shape[0]
     col = lambda name: theta[:, idx[name]][:, None]  # noqa: E731  (B, 1)
@@ -422,19 +437,28 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
         shape_params = (col(f"{fam}_u_lo"), col(f"{fam}_u_hi"), col(f"{fam}_log_s"), col(f"{fam}_c2"), col(f"{fam}_rho"))
         lo, hi, log_s, c2, rho = shape_params
         if kind == "filament":
-            uniq, inv = np.unique(offset, return_inverse=True)
-            parts = [_cached(cache, ("fil", fam, float(o)), lambda o=o: _filament_geometry(*_frames(h, wi, wr, alpha + o), norm_sum))
-                     for o in uniq]
-            u, cphi, G0 = (np.stack([p[k] for p in parts])[np.asarray(inv).reshape(-1)] for k in range(3))
+            if B == 1:  # one parameter vector (every call of the fit): no distinct offsets to sort out
+                part = _cached(cache, ("fil", fam, float(offset[0])),
+                               lambda: _filament_geometry(*_frames(h, wi, wr, alpha + offset[0]), norm_sum))
+                u, cphi, G0 = (a[None] for a in part)
+            else:
+                uniq, inv = np.unique(offset, return_inverse=True)
+                parts = [_cached(cache, ("fil", fam, float(o)), lambda o=o: _filament_geometry(*_frames(h, wi, wr, alpha + o), norm_sum))
+                         for o in uniq]
+                u, cphi, G0 = (np.stack([p[k] for p in parts])[np.asarray(inv).reshape(-1)] for k in range(3))
             S = _profile(u, lo, hi, log_s, c2) * _lobe_rho(cphi, rho) * G0
         else:
             # the expensive geometry depends only on (δ, ψ): evaluate it once per distinct pair
-            key = np.column_stack([offset, col(f"{fam}_psi")[:, 0]])
-            uniq, inv = np.unique(key, axis=0, return_inverse=True)
-            parts = [_staple_cached(cache, fam, alpha, float(o), float(p), h, wi, wr, norm_sum) for o, p in uniq]
-            inv = np.asarray(inv).reshape(-1)
-            G = np.concatenate([q[0] for q in parts])[inv]
-            cphi = np.concatenate([q[1] for q in parts])[inv]
+            if B == 1:
+                G, cphi = _staple_cached(cache, fam, alpha, float(offset[0]), float(theta[0, idx[f"{fam}_psi"]]),
+                                         h, wi, wr, norm_sum)[:2]
+            else:
+                key = np.column_stack([offset, col(f"{fam}_psi")[:, 0]])
+                uniq, inv = np.unique(key, axis=0, return_inverse=True)
+                parts = [_staple_cached(cache, fam, alpha, float(o), float(p), h, wi, wr, norm_sum) for o, p in uniq]
+                inv = np.asarray(inv).reshape(-1)
+                G = np.concatenate([q[0] for q in parts])[inv]
+                cphi = np.concatenate([q[1] for q in parts])[inv]
             S = _staple_combine(G, cphi, *shape_params)
         ks = np.exp(theta[:, [idx[f"{fam}_log_ks_{c}"] for c in range(C)]])  # (B, C)
         f = f + (Phi * S)[..., None] * ks[:, None, :]
@@ -469,7 +493,7 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
     Non-finite values of f give zero rows.
     """
     theta = np.asarray(theta, float)
-    idx = spec.index()
+    idx = _spec_index(spec)
     C, P_ = spec.n_channels, theta.size
     N = wi.shape[0]
     t = lambda name: theta[idx[name]]  # noqa: E731

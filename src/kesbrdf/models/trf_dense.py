@@ -23,6 +23,7 @@ from types import SimpleNamespace
 
 import numpy as np
 from scipy.linalg import qr
+from scipy.linalg.lapack import dpotrf as _dpotrf, dpotrs as _dpotrs
 
 __all__ = ["least_squares_lsmr"]
 
@@ -231,15 +232,26 @@ def _check_termination(dF, F, dx_norm, x_norm, ratio, ftol, xtol):
 
 
 def _cho_factor(B):
-    from scipy.linalg import cho_factor
+    """scipy.linalg.cho_factor(B) (upper): the same LAPACK potrf call without the wrapper's layers."""
+    if not np.all(np.isfinite(B)):
+        raise ValueError("array must not contain infs or NaNs")
+    c, info = _dpotrf(B, lower=False, overwrite_a=False, clean=False)
+    if info > 0:
+        raise np.linalg.LinAlgError(f"{info}-th leading minor of the array is not positive definite")
+    if info < 0:
+        raise ValueError(f"illegal value in argument {-info} of potrf")
+    return c, False
 
-    return cho_factor(B)
 
-
-def _cho_solve(c, g):
-    from scipy.linalg import cho_solve
-
-    return cho_solve(c, g)
+def _cho_solve(c_and_lower, g):
+    """scipy.linalg.cho_solve: LAPACK potrs on the factor of :func:`_cho_factor`."""
+    c, lower = c_and_lower
+    if not np.all(np.isfinite(g)):
+        raise ValueError("array must not contain infs or NaNs")
+    x, info = _dpotrs(c, g, lower=lower, overwrite_b=False)
+    if info != 0:
+        raise ValueError(f"illegal value in argument {-info} of potrs")
+    return x
 
 
 # -- LSMR (scipy/sparse/linalg/_isolve/lsmr.py) on [J diag(d); diag(reg)] -----------------
@@ -266,8 +278,11 @@ def _lsmr(Jh, reg, b, atol=1e-6, btol=1e-6, conlim=1e8):
     """x minimising |[Jh; diag(reg)] x − b| (LSMR, damp 0, x0 = 0, maxiter = n)."""
     m, n = Jh.m, Jh.n
 
-    def matvec(x):  # regularized_lsq_operator's matvec
-        return np.hstack((Jh.matvec(x), reg * x))
+    def matvec(x):  # regularized_lsq_operator's matvec: [Jh x; reg x]
+        out = np.empty(m + n)
+        out[:m] = Jh.matvec(x)
+        np.multiply(reg, x, out=out[m:])
+        return out
 
     def rmatvec(x):
         return Jh.rmatvec(x[:m]) + reg * x[m:]
