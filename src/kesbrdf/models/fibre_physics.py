@@ -320,54 +320,82 @@ def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
 
 def _staple_psi(base, psi):
     """:func:`_staple_geometry` from the frame's :func:`_staple_base` (the fit evaluates many ψ on one frame)."""
-    su, cu, Bq, root, v0, hx, hy, hz, wi_, wr_, ns = base
-    ix, iy, iz = wi_
-    rx, ry, rz = wr_
-    e = lambda a: a[..., None]  # noqa: E731  (K, N) -> (K, N, 1)
-    tpsi = e(np.tan(psi))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        D = Bq / (root * tpsi)
-    ok = np.abs(D) < 1.0
-    v = v0 + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
-    v = np.where(v > np.pi, v - 2 * np.pi, v)  # the same point in (−π, π] (irawan2012: v* wrap)
-    ok &= np.abs(v) < np.pi / 2
-    sv, cv = np.sin(v), np.cos(v)
-    nx, ny, nz = sv, su * cv, cu * cv
-    ci = nx * ix + ny * iy + nz * iz
-    cr = nx * rx + ny * ry + nz * rz
-    nh_signed = nx * hx + ny * hy + nz * hz
-    nh = np.abs(nh_signed)
-    sp, cp = e(np.sin(psi)), e(np.cos(psi))
-    tx = -cv * sp
-    ty = cu * cp + su * sv * sp
-    tz = -su * cp + cu * sv * sp
-    cphi = _cos_phi(*wi_, *wr_, tx, ty, tz)
-    AS = _seeliger(ci, cr)
-    nhf = np.maximum(nh, 1e-9)
-    scale = 1.0 / (ns * np.abs(sp))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        G = np.where(ok, AS / nhf, 0.0) * scale
-        dv = np.where(ok, D / (np.sqrt(np.maximum(1.0 - D * D, 1e-300)) * sp * cp), 0.0)
-        dnx, dny, dnz = cv * dv, -su * sv * dv, -cu * sv * dv
-        dci = dnx * ix + dny * iy + dnz * iz
-        dcr = dnx * rx + dny * ry + dnz * rz
-        dnh = np.where(nh > 1e-9, np.sign(nh_signed) * (dnx * hx + dny * hy + dnz * hz), 0.0)
-        pos = (ci > 0) & (cr > 0)
-        dAS = np.where(pos, (cr * cr * dci + ci * ci * dcr) / np.where(pos, (ci + cr) ** 2, 1.0), 0.0)
-        dG = np.where(ok, dAS / nhf - AS * dnh / (nhf * nhf), 0.0) * scale - G * (cp / sp)
-    dt = (-cv * cp + sv * sp * dv,
-          -cu * sp + su * sv * cp + su * cv * sp * dv,
-          su * sp + cu * sv * cp + cu * cv * sp * dv)
-    dcphi = _cos_phi_derivative(wi_, wr_, (tx, ty, tz), dt)
-    return G, cphi, dG, np.where(ok, dcphi, 0.0)
+    entry = _StapleEntry(base, psi)
+    return (entry.G, entry.cphi, *entry.derivatives())
 
 
-def _staple_cached(cache, fam, alpha, offset, psi, h, wi, wr, norm_sum):
-    """:func:`_staple_geometry` of one family at one (δ, ψ) (K = 1), its ψ-free base cached per (family, δ)."""
+class _StapleEntry:
+    """One (frame, ψ) of :func:`_staple_geometry`: G and cos φ at once, the ψ-derivatives when asked.
+
+    A fit evaluates the residuals at every trial step but the Jacobian only at accepted
+    ones, so the derivatives (half the work) wait for :meth:`derivatives`, which finishes
+    the same computation from the kept intermediates (the same operations in the same order).
+    """
+
+    def __init__(self, base, psi):
+        su, cu, Bq, root, v0, hx, hy, hz, wi_, wr_, ns = base
+        ix, iy, iz = wi_
+        rx, ry, rz = wr_
+        e = lambda a: a[..., None]  # noqa: E731  (K, N) -> (K, N, 1)
+        tpsi = e(np.tan(psi))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            D = Bq / (root * tpsi)
+        ok = np.abs(D) < 1.0
+        v = v0 + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
+        v = np.where(v > np.pi, v - 2 * np.pi, v)  # the same point in (−π, π] (irawan2012: v* wrap)
+        ok &= np.abs(v) < np.pi / 2
+        sv, cv = np.sin(v), np.cos(v)
+        nx, ny, nz = sv, su * cv, cu * cv
+        ci = nx * ix + ny * iy + nz * iz
+        cr = nx * rx + ny * ry + nz * rz
+        nh_signed = nx * hx + ny * hy + nz * hz
+        nh = np.abs(nh_signed)
+        sp, cp = e(np.sin(psi)), e(np.cos(psi))
+        tx = -cv * sp
+        ty = cu * cp + su * sv * sp
+        tz = -su * cp + cu * sv * sp
+        self.cphi = _cos_phi(*wi_, *wr_, tx, ty, tz)
+        AS = _seeliger(ci, cr)
+        nhf = np.maximum(nh, 1e-9)
+        scale = 1.0 / (ns * np.abs(sp))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self.G = np.where(ok, AS / nhf, 0.0) * scale
+        self._lazy = (base, D, ok, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz)
+        self._derivatives = None
+        self.nbytes = sum(x.nbytes for x in (D, ok, sv, cv, ci, cr, nh, nh_signed, nhf, AS, tx, ty, tz, self.cphi, self.G))
+
+    def derivatives(self):
+        """(∂G/∂ψ, ∂cos φ/∂ψ), each (K, N, U) (:func:`_staple_geometry`)."""
+        if self._derivatives is None:
+            base, D, ok, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz = self._lazy
+            su, cu, _, _, _, hx, hy, hz, wi_, wr_, _ = base
+            ix, iy, iz = wi_
+            rx, ry, rz = wr_
+            G = self.G
+            with np.errstate(invalid="ignore", divide="ignore"):
+                dv = np.where(ok, D / (np.sqrt(np.maximum(1.0 - D * D, 1e-300)) * sp * cp), 0.0)
+                dnx, dny, dnz = cv * dv, -su * sv * dv, -cu * sv * dv
+                dci = dnx * ix + dny * iy + dnz * iz
+                dcr = dnx * rx + dny * ry + dnz * rz
+                dnh = np.where(nh > 1e-9, np.sign(nh_signed) * (dnx * hx + dny * hy + dnz * hz), 0.0)
+                pos = (ci > 0) & (cr > 0)
+                dAS = np.where(pos, (cr * cr * dci + ci * ci * dcr) / np.where(pos, (ci + cr) ** 2, 1.0), 0.0)
+                dG = np.where(ok, dAS / nhf - AS * dnh / (nhf * nhf), 0.0) * scale - G * (cp / sp)
+            dt = (-cv * cp + sv * sp * dv,
+                  -cu * sp + su * sv * cp + su * cv * sp * dv,
+                  su * sp + cu * sv * cp + cu * cv * sp * dv)
+            dcphi = _cos_phi_derivative(wi_, wr_, (tx, ty, tz), dt)
+            self._derivatives = (dG, np.where(ok, dcphi, 0.0))
+            self._lazy = None  # the intermediates are not needed again
+        return self._derivatives
+
+
+def _staple_cached(cache, fam, alpha, offset, psi, h, wi, wr, norm_sum) -> _StapleEntry:
+    """The :class:`_StapleEntry` of one family at one (δ, ψ) (K = 1), its ψ-free base cached per (family, δ)."""
     def compute():
         base = _cached(cache, ("stb", fam, offset), lambda: _staple_base(
             *(q[None] for q in _frames(h, wi, wr, alpha + offset)), norm_sum[None]))
-        return _staple_psi(base, np.array([[psi]]))
+        return _StapleEntry(base, np.array([[psi]]))
 
     return _cached(cache, ("sta", fam, offset, psi), compute)
 
@@ -389,7 +417,7 @@ def _cached(cache, key, compute):
         return compute()
     if key not in cache:
         value = compute()
-        size = sum(a.nbytes for a in value if isinstance(a, np.ndarray))
+        size = value.nbytes if isinstance(value, _StapleEntry) else sum(a.nbytes for a in value if isinstance(a, np.ndarray))
         used = cache.get("nbytes", 0) + size
         if len(cache) > CACHE_MAX_ENTRIES or used > CACHE_MAX_BYTES:
             cache.clear()
@@ -450,15 +478,16 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
         else:
             # the expensive geometry depends only on (δ, ψ): evaluate it once per distinct pair
             if B == 1:
-                G, cphi = _staple_cached(cache, fam, alpha, float(offset[0]), float(theta[0, idx[f"{fam}_psi"]]),
-                                         h, wi, wr, norm_sum)[:2]
+                entry = _staple_cached(cache, fam, alpha, float(offset[0]), float(theta[0, idx[f"{fam}_psi"]]),
+                                       h, wi, wr, norm_sum)
+                G, cphi = entry.G, entry.cphi
             else:
                 key = np.column_stack([offset, col(f"{fam}_psi")[:, 0]])
                 uniq, inv = np.unique(key, axis=0, return_inverse=True)
                 parts = [_staple_cached(cache, fam, alpha, float(o), float(p), h, wi, wr, norm_sum) for o, p in uniq]
                 inv = np.asarray(inv).reshape(-1)
-                G = np.concatenate([q[0] for q in parts])[inv]
-                cphi = np.concatenate([q[1] for q in parts])[inv]
+                G = np.concatenate([q.G for q in parts])[inv]
+                cphi = np.concatenate([q.cphi for q in parts])[inv]
             S = _staple_combine(G, cphi, *shape_params)
         ks = np.exp(theta[:, [idx[f"{fam}_log_ks_{c}"] for c in range(C)]])  # (B, C)
         f = f + (Phi * S)[..., None] * ks[:, None, :]
@@ -523,8 +552,8 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
         else:
             psi = t(f"{fam}_psi")
             shape_cols.append(idx[f"{fam}_psi"])
-            G, cphi, dG, dcphi = (a[0] for a in _staple_cached(  # (N, U) each
-                cache, fam, alpha, float(offset), float(psi), h, wi, wr, norm_sum))
+            entry = _staple_cached(cache, fam, alpha, float(offset), float(psi), h, wi, wr, norm_sum)
+            G, cphi, dG, dcphi = (a[0] for a in (entry.G, entry.cphi, *entry.derivatives()))  # (N, U) each
             P, dP = _profile_derivatives(_U_NODES, lo, hi, log_s, c2)  # (U,), (4, U)
             Nl = _lobe_rho(cphi, rho)
             NG = Nl * G
