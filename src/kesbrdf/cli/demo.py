@@ -184,14 +184,23 @@ def _compare_name(reference) -> str:
     return "sadeghi-black-satin" if isinstance(reference, Sadeghi2013) else "satin-ward"
 
 
+#: Protocols of the demo's reference-vs-model panel: the paper's, the protocol of the
+#: embedded sample.  The dense panel (``kesbrdf compare-render sadeghi-black-satin
+#: --protocol dense``, and benchmarks/bench_compare.py) cost the demo ~47 s of CPU, 31 s
+#: of it the 900-row default fit: a sixth of the demo's CPU for one image (issue 17's
+#: budget, docs/decisions.md, "The demo's compare panel").
+DEMO_COMPARE_PROTOCOLS = ("paper",)
+
+
 def _compare_rows(out: str, name: str, say=None) -> list:
     """The reference-vs-model renders of the demo, one (protocol, numbers without the
-    images, wall s, CPU s) per protocol; the panels are written (atomically) by
-    :func:`~kesbrdf.render.compare.compare_render`.  ``say`` announces each protocol."""
+    images, wall s, CPU s) per protocol of :data:`DEMO_COMPARE_PROTOCOLS`; the panels are
+    written (atomically) by :func:`~kesbrdf.render.compare.compare_render`.  ``say``
+    announces each protocol."""
     from kesbrdf.render import compare
 
     rows = []
-    for protocol in compare.PROTOCOLS:
+    for protocol in DEMO_COMPARE_PROTOCOLS:
         if say is not None:
             say(f"compare: {name} rendered by itself and by its {protocol}-protocol model")
         t0, c0 = time.perf_counter(), time.process_time()
@@ -509,7 +518,7 @@ def _compare_available() -> bool:
 
 
 def _comparisons(out: Path, reference, say, early: _Spawned | None = None) -> list:
-    """Reference vs model renders of the embedded fabric (paper and dense protocols).
+    """Reference vs model renders of the embedded fabric (:data:`DEMO_COMPARE_PROTOCOLS`).
 
     ``early``: the same renders started in a background process with the demo; their
     lines are printed here, with the background's wall and CPU time.
