@@ -61,7 +61,7 @@ from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisp
 __all__ = ["LIBRARY_FAMILIES", "FORMAT", "VERSION", "NOISE", "ARRAYS", "fabric_seed", "noise_seed", "draw_fabric",
            "build_reference", "compute_fabric", "fabric_digest", "library_sha256", "geometry", "write_geometry",
            "shard_name", "build_shard", "read_shard_meta", "shard_valid", "FabricLibrary", "load_library",
-           "stratified", "truth_sets", "header"]
+           "stratified", "truth_sets", "header", "check_families"]
 
 #: The drawable families, in round-robin order.
 LIBRARY_FAMILIES = ("irawan2012", "sadeghi2013", "ward", "ashikhmin_shirley", "ggx")
@@ -70,12 +70,12 @@ FORBIDDEN = ("microflake", "sggx", "spongecake")
 #: The artefact's format name and version (a change of what a fabric holds bumps it).
 FORMAT = "kesbrdf-fabric-library"
 VERSION = 1
-#: Multiplicative noise of the measurements (σ = 2 % of the value), as
-#: :data:`kesbrdf.validate.lofo.NOISE`.
-NOISE = 0.02
 #: Arrays of one fabric, in digest order: (name, dtype).
 ARRAYS = (("paper", "<f8"), ("paper_clean", "<f8"), ("dense", "<f8"), ("dense_clean", "<f8"),
           ("held", "<f4"), ("hemi90", "<f4"), ("hemi45", "<f4"))
+#: Multiplicative noise of the simulated measurements (σ = 2 % of the value), as
+#: benchmarks/bench_selection.py; :data:`kesbrdf.validate.lofo.NOISE` is this one.
+NOISE = 0.02
 _PROTOCOL_STREAM = {"paper": 1, "dense": 2}
 
 
@@ -162,15 +162,15 @@ _DRAWS = {"irawan2012": _draw_irawan, "sadeghi2013": _draw_sadeghi, "ward": _dra
           "ashikhmin_shirley": _draw_ashikhmin_shirley, "ggx": _draw_ggx}
 
 
-def check_families(families) -> tuple[str, ...]:
+def check_families(families, flag: str = "families") -> tuple[str, ...]:
     """The families as a tuple; a one-line error for an unknown or forbidden name."""
     families = tuple(families)
     bad = [f for f in families if any(x in str(f).lower() for x in FORBIDDEN)]
     if bad:
-        raise KesbrdfError(f"families: microflake/SGGX cloth is kept for an independent check, got {', '.join(bad)}")
+        raise KesbrdfError(f"{flag}: microflake/SGGX cloth is kept for an independent check, got {', '.join(bad)}")
     unknown = [f for f in families if f not in _DRAWS]
     if unknown or not families or len(set(families)) != len(families):
-        raise KesbrdfError(f"families: expected distinct names from {', '.join(LIBRARY_FAMILIES)}, "
+        raise KesbrdfError(f"{flag}: expected distinct names from {', '.join(LIBRARY_FAMILIES)}, "
                            f"got {', '.join(map(str, families)) or 'none'}")
     return families
 
