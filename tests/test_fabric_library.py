@@ -115,13 +115,14 @@ def test_cache_skips_finished_shards_and_rebuilds_a_damaged_one(built, tmp_path)
     copy = tmp_path / "lib"
     shutil.copytree(out, copy)
     again = build_fabric_library(copy, 10, seed=5, shard_size=4, workers=0)
-    assert again["build"]["shards_built"] == 0 and again["build"]["shards_cached"] == 3
+    assert again["run"]["shards_built"] == 0 and again["run"]["shards_cached"] == 3
+    assert again["build"] == man["build"]  # a run that builds nothing keeps the build's record
     # a truncated shard and a missing one are rebuilt, to the same content
     first = copy / man["shards"][0]["file"]
     first.write_bytes(first.read_bytes()[:100])
     (copy / man["shards"][2]["file"]).unlink()
     fixed = build_fabric_library(copy, 10, seed=5, shard_size=4, workers=0)
-    assert fixed["build"]["shards_built"] == 2 and fixed["sha256"] == man["sha256"]
+    assert fixed["run"]["shards_built"] == 2 and fixed["sha256"] == man["sha256"]
     # another shard size replaces the shard files, same content hash
     other = build_fabric_library(copy, 10, seed=5, shard_size=3, workers=0)
     assert other["sha256"] == man["sha256"]

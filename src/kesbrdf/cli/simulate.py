@@ -141,7 +141,7 @@ def _run_fabric_library(args) -> int:
                                    workers=args.workers, progress=bar)
     finally:
         bar.close()
-    b = man["build"]
+    b = man["run"]
     stderr(f"fabric library {args.output}: {man['n']} fabric(s) of {len(man['families'])} families, "
            f"{b['shards_built']} shard(s) built, {b['shards_cached']} cached, {b['seconds']:.1f} s wall, "
            f"{b['cpu_seconds_shards'] + b['cpu_seconds_driver']:.1f} s CPU")
