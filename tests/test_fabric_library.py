@@ -1,7 +1,7 @@
 """The synthetic fabric library (kesbrdf.validate.library) and lofo drawing from it.
 
 A small library (10 fabrics, two of each family) is built serially once per module
-(~2 s); the bit-identity of a rebuild on a Dask cluster is tests/batch/test_fabric_library.py.
+(~2 s); the bit-identity of a rebuild on a Dask cluster is tests/batch/test_fabric_library_dask.py.
 """
 
 from __future__ import annotations

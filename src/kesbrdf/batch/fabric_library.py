@@ -96,9 +96,11 @@ def build_fabric_library(out, n: int, seed: int = 0, families=lib.LIBRARY_FAMILI
         if doc is not None:
             docs[(a, b)] = doc
     todo = [s for s in plan if s not in docs]
-    state = {"fabrics": sum(b - a for a, b in docs), "done": 0}
+    state = {"fabrics": sum(b - a for a, b in docs), "done": 0, "workers": 0}
 
     def on_event(ev):
+        if ev["event"] == "start":
+            state["workers"] = ev["workers"]
         if progress is None:
             return
         if ev["event"] == "start":
@@ -110,14 +112,12 @@ def build_fabric_library(out, n: int, seed: int = 0, families=lib.LIBRARY_FAMILI
             state["done"] += 1
             progress({"event": "shard", "done": state["done"], "total": len(todo), "fabrics": state["fabrics"]})
 
-    built_workers = 0
     if todo:
         tasks = [(str(out), seed, families, a, b) for a, b in todo]
         results = run_tasks(lib.build_shard, tasks, workers=workers, scheduler=scheduler, retries=retries,
                             progress=on_event, name="fabric-library")
         for s, doc in zip(todo, results):
             docs[s] = doc
-        built_workers = workers if scheduler is None else -1
     elif progress:
         progress({"event": "start", "fabrics": n, "shards": len(plan), "cached": len(docs), "workers": 0})
     fabrics = [f for s in plan for f in docs[s]["fabrics"]]
@@ -130,7 +130,7 @@ def build_fabric_library(out, n: int, seed: int = 0, families=lib.LIBRARY_FAMILI
         "cpu_seconds_driver": time.process_time() - c0,
         "cpu_seconds_shards": sum(docs[s]["cpu_seconds"] for s in todo),
         "shards_built": len(todo), "shards_cached": len(plan) - len(todo), "shard_size": shard_size,
-        "workers": built_workers,
+        "workers": state["workers"],
     }
     old = _read_manifest(out / "manifest.json")
     if not todo and old is not None and old.get("sha256") == sha and old.get("shards") == _shard_list(plan, docs):

@@ -10,6 +10,7 @@ to the same content sha256 and hold equal arrays.  Uses the session's LocalClust
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from kesbrdf.batch.fabric_library import build_fabric_library
 from kesbrdf.validate.library import LIBRARY_FAMILIES, load_library
@@ -60,3 +61,25 @@ def test_cli_builds_caches_and_refuses_bad_input(tmp_path, capsys):
         lines = capsys.readouterr().err.strip().splitlines()
         assert len(lines) == 1 and expected in lines[0], lines
     assert not (tmp_path / "x").exists()
+
+
+def test_run_tasks_keeps_task_order_retries_and_then_raises():
+    """The engine's generic task runner (serial path; the Dask path is the test above)."""
+    from kesbrdf.batch.engine import run_tasks
+
+    calls = {}
+
+    def flaky(k, fail_times):
+        calls[k] = calls.get(k, 0) + 1
+        if calls[k] <= fail_times:
+            raise RuntimeError(f"transient {k}")
+        return k * k
+
+    events = []
+    assert run_tasks(flaky, [(3, 0), (1, 2), (2, 1)], workers=0, retries=2, progress=events.append) == [9, 1, 4]
+    assert calls == {3: 1, 1: 3, 2: 2}
+    assert [e["done"] for e in events if e["event"] == "task"] == [1, 2, 3]
+    calls.clear()
+    with pytest.raises(RuntimeError, match="transient 5"):
+        run_tasks(flaky, [(5, 3)], workers=0, retries=2)
+    assert calls == {5: 3}
