@@ -120,13 +120,11 @@ def test_white_furnace_albedo_at_most_one(albedo, ax, ay, eta, rho_d):
     assert rho.max() <= 1.0 + QUADRATURE_ATOL, rho.max()
 
 
-def test_smooth_specular_furnace_is_fresnel():
+def test_smooth_specular_furnace_is_fresnel(albedo):
     """A near-mirror (α = 0.05), no body: the albedo at normal view is F(0°) = ((η−1)/(η+1))²
     up to the shadowing of a slightly rough surface (G2 < 1 costs < 1 % at normal view)."""
-    from conftest import directional_albedo
-
     g = AnisotropicGGX(0.05, 0.05, eta=1.5, rho_d=0.0)
-    rho = directional_albedo(g, sph(0, 0), n_theta=384, n_phi=256)[0]
+    rho = albedo(g, sph(0, 0), n_theta=384, n_phi=256)[0]
     assert rho == pytest.approx(0.04, rel=0.02)
 
 
