@@ -19,6 +19,13 @@ Fitters:
 Run alone: ``python benchmarks/bench_lofo.py [--draws N]``; it merges its section
 into benchmarks/results.json.  Rows are cached in out/bench_lofo_cache.json (delete
 it after changing a fitter).
+
+On the synthetic fabric library (``kesbrdf simulate --fabric-library 2000 -o
+out/library``; docs/validation.md): ``python benchmarks/bench_lofo.py --library
+out/library --per-family K [--families ward,ggx]`` fits a stratified subsample of K
+fabrics per family, with the library's stored measurements and truths (section
+``lofo_library``; cache out/bench_lofo_library_<sha>.json).  Every fit costs 10-30 s,
+so all 2,000 fabrics would take days on two cores: K = 3-10 is the practical range.
 """
 
 from __future__ import annotations
@@ -37,7 +44,9 @@ HERE = Path(__file__).resolve().parent
 if str(HERE.parent / "src") not in sys.path:
     sys.path.insert(0, str(HERE.parent / "src"))
 
-from kesbrdf.validate.lofo import PROTOCOLS, choose_lofo, family_library, family_table, run_lofo  # noqa: E402
+from kesbrdf.validate.lofo import (  # noqa: E402
+    PROTOCOLS, choose_lofo, family_library, family_library_from, family_table, library_inputs, run_lofo,
+)
 
 CACHE = HERE.parent / "out" / "bench_lofo_cache.json"
 
@@ -97,11 +106,21 @@ def _dense_vs_paper(results, name):
     return out
 
 
-def run(draws: int = 3, names=None, cache_path: Path = CACHE) -> dict:
+def run(draws: int = 3, names=None, cache_path: Path = CACHE, library=None, per_family: int = 1,
+        families=None, seed: int = 0) -> dict:
+    data = None
+    if library is not None:
+        from kesbrdf.validate.library import load_library
+
+        built = load_library(library)
+        lib = family_library_from(built, per_family=per_family, seed=seed, families=families)
+        data = library_inputs(built, lib)
+        cache_path = cache_path.with_name(f"bench_lofo_library_{built.sha256[:12]}.json")
+    else:
+        lib = family_library(draws=draws)
     cache = {}
     if cache_path.is_file():
         cache = json.loads(cache_path.read_text())
-    lib = family_library(draws=draws)
     fit_map = fitters(names)
 
     def progress(*a):
@@ -111,7 +130,7 @@ def run(draws: int = 3, names=None, cache_path: Path = CACHE) -> dict:
         tmp.write_text(json.dumps(cache, default=float))
         os.replace(tmp, cache_path)
 
-    results = run_lofo(lib, fit_map, progress=progress, cache=cache)
+    results = run_lofo(lib, fit_map, progress=progress, cache=cache, data=data)
     out = {"draws": draws, "protocols": list(PROTOCOLS), "fitters": list(fit_map),
            "families": family_table(results, fit_map), "fabrics": results,
            "dense_over_paper_hemispheres": {n: _dense_vs_paper(results, n) for n in fit_map}}
@@ -126,6 +145,9 @@ def run(draws: int = 3, names=None, cache_path: Path = CACHE) -> dict:
     out["fixed_kind_lofo"] = {f: {"value": v["value"]} for f, v in choose_lofo(results, fixed, grid).items()}
     if "default" in fit_map:
         out["dense_kes_branch_lofo"] = dense_branch_lofo(results)
+    if library is not None:
+        out["library"] = {"path": str(library), "sha256": built.sha256, "n": built.n, "per_family": per_family,
+                          "seed": seed, "fabrics": {f: list(v) for f, v in lib.items()}}
     return out
 
 
@@ -169,9 +191,9 @@ def dense_branch_lofo(results, branches=("kes-line", "rows")) -> dict:
     return {"chosen": chosen, "cost_all": {b: cost(fams, b) for b in branches}, "dense_over_paper": ratios}
 
 
-def _merge(section: dict, path: Path = HERE / "results.json") -> None:
+def _merge(section: dict, path: Path = HERE / "results.json", key: str = "lofo") -> None:
     doc = json.loads(path.read_text()) if path.is_file() else {"benchmarks": {}}
-    doc.setdefault("benchmarks", {})["lofo"] = section
+    doc.setdefault("benchmarks", {})[key] = section
     tmp = path.with_suffix(".part")
     tmp.write_text(json.dumps(doc, indent=1, default=float) + "\n")
     os.replace(tmp, path)
@@ -198,10 +220,16 @@ if __name__ == "__main__":
     ap.add_argument("--draws", type=int, default=3)
     ap.add_argument("--only", nargs="*", help="fitter names")
     ap.add_argument("--no-merge", action="store_true")
+    ap.add_argument("--library", metavar="DIR", help="draw the fabrics from a built fabric library")
+    ap.add_argument("--per-family", type=int, default=3, metavar="K", help="with --library: fabrics per family")
+    ap.add_argument("--families", metavar="A,B", help="with --library: only these families")
+    ap.add_argument("--seed", type=int, default=0, help="with --library: seed of the stratified subsample")
     args = ap.parse_args()
-    section = run(args.draws, args.only)
+    fams = [f.strip() for f in args.families.split(",") if f.strip()] if args.families else None
+    section = run(args.draws, args.only, library=args.library, per_family=args.per_family, families=fams,
+                  seed=args.seed)
     print_table(section)
     if not args.no_merge:
-        _merge(section)
+        _merge(section, key="lofo_library" if args.library else "lofo")
     print(json.dumps(section["dense_over_paper_hemispheres"], indent=1, default=float))
     np.set_printoptions(precision=3)

@@ -216,13 +216,15 @@ def test_catalogue_errors_are_one_line_and_per_fabric(tmp_path):
 def test_folder_catalogue_and_file_url_output(library, serial, tmp_path):
     from kesbrdf.batch import run_batch
 
-    result = run_batch(str(library.parent), f"file://{tmp_path}/viaurl", steps=("fit",), workers=0)
+    # ingest only: a folder catalogue has no kind column, so its fits are kesbrdf fit's
+    # rule (~8 s CPU a fabric), where the catalogue asks for kes (conftest.py)
+    result = run_batch(str(library.parent), f"file://{tmp_path}/viaurl", steps=("ingest",), workers=0)
     ids = [r["id"] for r in result.records]
     assert "fabric-003" in ids and "broken-1-bad-value" in ids and "catalog" not in ids
     got = _outputs(tmp_path / "viaurl")
     ref = _outputs(serial[0])
-    # no reference options in a folder catalogue; ingest and fit do not read them
-    for key in (("fabric-001", "fit"), ("fabric-003", "ingest")):
+    # no reference options in a folder catalogue; ingest does not read them
+    for key in (("fabric-001", "ingest"), ("fabric-003", "ingest")):
         assert got[key] == ref[key]
 
 
@@ -378,3 +380,23 @@ def test_catalogue_and_inputs_behind_an_fsspec_url(library, serial, tmp_path):
     assert rec["fabric-003"]["steps"]["ingest"]["result"]["source"] == "manifest"
     assert "No such file or directory" in rec["broken-3-missing-file"]["error"]
     fs.rm("/kesbrdf-batch-lib", recursive=True)
+
+
+def test_a_batch_fits_by_kesbrdf_fits_rule(tmp_path):
+    """A fabric whose row sets no fit option gets the spec of a plain ``kesbrdf fit``
+    (kind auto, no options, so the prior comparison runs): the fit is deterministic, so
+    the same model.  Before 2026-12-03 the catalogue's defaults counted as options given
+    and the batch skipped the comparison (fit reports with "comparison": null)."""
+    from kesbrdf.batch.catalog import parse_catalog
+    from kesbrdf.batch.runner import fabric_options
+    from kesbrdf.batch.steps import step_params
+    from kesbrdf.pipeline import FitSpec
+
+    plain, asked, option = parse_catalog("id,input,reference,kind,fallback\na,a.csv,ward,,\nb,b.csv,ward,kes,\n"
+                                         "c,c.csv,ward,,error\n", str(tmp_path / "cat.csv"))
+    spec = FitSpec.from_row(step_params("fit", fabric_options(plain)))
+    assert (spec.kind, dict(spec.options), spec.compare, spec.strict) == ("auto", {}, True, False)
+    assert spec.to_json() == FitSpec().to_json()
+    assert FitSpec.from_row(step_params("fit", fabric_options(asked))).to_json() == FitSpec("kes").to_json()
+    # an option the row gives is passed on (and, as on the command line, turns the comparison off)
+    assert dict(FitSpec.from_row(step_params("fit", fabric_options(option))).options) == {"fallback": "error"}

@@ -29,6 +29,8 @@ EVAL_CASES = [
     ("ward", None),
     ("satin-ward", None),
     ("ashikhmin-shirley", None),
+    ("ggx", None),
+    ("ggx", {"alpha_x": 0.05, "alpha_y": 0.6, "eta": 2.2, "rho_d": [0.9, 0.1, 0.0], "k_s": 0.5}),
     ("sadeghi-satin", None),
     ("sadeghi-black-satin", None),
     ("sadeghi-velvet", None),

@@ -42,14 +42,19 @@ from kesbrdf.errors import FormatError, where
 __all__ = ["Fabric", "read_catalog", "check_id", "OPTION_COLUMNS", "DEFAULT_OPTIONS"]
 
 #: Option column -> default (also the options a step's parameters are built from).
+#: The fit options default to None, "not given": ``kesbrdf fit``'s own defaults, and
+#: ``kind=auto`` then compares with the woven-cloth prior exactly as the command does.
+#: A value here would count as an option given and switch that comparison off, so a
+#: fabric would get another model in a batch than from ``kesbrdf fit`` (it did, until
+#: 2026-12-03: docs/decisions.md, "A batch fits by kesbrdf fit's rule").
 DEFAULT_OPTIONS: dict = {
     "reference": None,
     "reference_params": None,
     "kind": "auto",
     "orientations": None,
-    "fallback": "log",
-    "body": "auto",
-    "interpolation": "kes",
+    "fallback": None,
+    "body": None,
+    "interpolation": None,
     "warp_deg": None,
     "mapping": None,
 }

@@ -43,7 +43,8 @@ from kesbrdf.batch.runner import DEFAULT_TASK_TIMEOUT, run_chunk
 from kesbrdf.batch.steps import RENDER_STEPS, closure
 from kesbrdf.batch.store import Store
 
-__all__ = ["run_batch", "BatchResult", "DEFAULT_STEPS", "start_local_cluster", "render_available", "worker_env"]
+__all__ = ["run_batch", "BatchResult", "DEFAULT_STEPS", "start_local_cluster", "render_available", "worker_env",
+           "run_tasks"]
 
 DEFAULT_STEPS = ("ingest", "fit", "validate", "report", "export", "preview")
 #: Largest number of fabrics in one core task (:func:`auto_chunk`).
@@ -372,6 +373,92 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
             for fab in again:
                 submit([fab], kind)
         return n_workers, dash_link
+    finally:
+        if own_client:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def run_tasks(fn, tasks: list, workers: int | None = None, scheduler=None, retries: int = 2, progress=None,
+              name: str = "task") -> list:
+    """``[fn(*args) for args in tasks]`` on the batch engine's cluster, results in task order.
+
+    The engine for work that is not a catalogue of fabrics (the synthetic fabric library
+    of :mod:`kesbrdf.batch.fabric_library`): ``workers=0`` runs serially here; no
+    ``scheduler`` starts :func:`start_local_cluster` (spawned single-threaded worker
+    processes, no render resource); ``scheduler`` may be an address or a
+    ``distributed.Client`` (left open).  A task that raises is resubmitted up to
+    ``retries`` times, then its exception propagates.  ``progress(event)`` is called
+    with ``{"event": "start", "total", "workers"}`` and, per finished task,
+    ``{"event": "task", "index", "result", "done", "total"}``.
+    """
+    tasks = [tuple(t) for t in tasks]
+    results: list = [None] * len(tasks)
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if scheduler is None and workers == 0:
+        if progress:
+            progress({"event": "start", "total": len(tasks), "workers": 0})
+        for k, args in enumerate(tasks):
+            for attempt in range(retries + 1):
+                try:
+                    results[k] = fn(*args)
+                    break
+                except Exception:  # noqa: BLE001 - retried like a Dask task, then raised
+                    if attempt == retries:
+                        raise
+            if progress:
+                progress({"event": "task", "index": k, "result": results[k], "done": k + 1, "total": len(tasks)})
+        return results
+    from distributed import Client, as_completed
+
+    cluster = None
+    own_client = True
+    if scheduler is None:
+        cluster = start_local_cluster(workers, render=False)
+        client = Client(cluster)
+    elif isinstance(scheduler, str):
+        client = Client(scheduler)
+    else:
+        client, own_client = scheduler, False
+    try:
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        try:
+            client.register_plugin(_worker_plugin(worker_env(max(1, n_workers))))
+        except AttributeError:  # pragma: no cover - older distributed
+            client.register_worker_plugin(_worker_plugin(worker_env(max(1, n_workers))))
+        if progress:
+            progress({"event": "start", "total": len(tasks), "workers": n_workers})
+        token = uuid.uuid4().hex[:8]
+        index: dict[str, int] = {}
+        attempts = [0] * len(tasks)
+        ac = as_completed()
+
+        def submit(k):
+            attempts[k] += 1
+            fut = client.submit(fn, *tasks[k], key=f"kesbrdf-{name}-{k}-{token}-{attempts[k]}", pure=False)
+            index[fut.key] = k
+            ac.add(fut)
+
+        for k in range(len(tasks)):
+            submit(k)
+        done = 0
+        for fut in ac:
+            k = index.pop(fut.key)
+            try:
+                results[k] = fut.result()
+            except Exception:  # noqa: BLE001 - a crashed or killed task: again, while retries last
+                if attempts[k] <= retries:
+                    submit(k)
+                    continue
+                raise
+            finally:
+                fut.release()
+            done += 1
+            if progress:
+                progress({"event": "task", "index": k, "result": results[k], "done": done, "total": len(tasks)})
+        return results
     finally:
         if own_client:
             client.close()

@@ -53,10 +53,12 @@ def _draw(k: int, rng: np.random.Generator) -> tuple[str, dict | None]:
                                  "R_d": [round(float(x), 4) for x in rng.uniform(0.02, 0.5, 3)]}
 
 
-def simulate_library(n: int, out, seed: int = 0, broken: int = 2, images_every: int = 4) -> Path:
+def simulate_library(n: int, out, seed: int = 0, broken: int = 2, images_every: int = 4,
+                     kind: str | None = None) -> Path:
     """Write ``n`` fabrics plus ``broken`` broken ones and ``catalog.csv`` into ``out``.
 
-    Returns the catalogue's path.
+    ``kind``: the catalogue's ``kind`` column for every good fabric (None: empty, so
+    the batch fits by ``kesbrdf fit``'s rule).  Returns the catalogue's path.
     """
     from kesbrdf.errors import KesbrdfError
     from kesbrdf.measure.gonio import measure
@@ -84,6 +86,8 @@ def simulate_library(n: int, out, seed: int = 0, broken: int = 2, images_every: 
             write_measurement(out / f"{fid}.csv", m)
             inp = f"{fid}.csv"
         opts = {"reference": name}
+        if kind is not None:
+            opts["kind"] = kind
         if params:
             opts["reference_params"] = params
         fabrics.append(Fabric(id=fid, input=inp, options=opts, meta={"notes": f"simulated {name}"}))

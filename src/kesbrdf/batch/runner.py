@@ -42,7 +42,7 @@ from kesbrdf.batch.store import Store, is_url
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.io.files import open_regular
 
-__all__ = ["run_fabric", "run_chunk", "PERMANENT_ERRORS", "TEST_HOOKS_ENV", "DEFAULT_TASK_TIMEOUT"]
+__all__ = ["run_fabric", "run_chunk", "fabric_options", "PERMANENT_ERRORS", "TEST_HOOKS_ENV", "DEFAULT_TASK_TIMEOUT"]
 
 #: Exceptions that are the input's fault: reported, never retried.
 PERMANENT_ERRORS = (KesbrdfError, FileNotFoundError, IsADirectoryError, NotADirectoryError, PermissionError,
@@ -162,7 +162,7 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
     if fabric.error:
         record.update(status="failed", error=fabric.error, failed_step="catalog")
         return record
-    options = {**DEFAULT_OPTIONS, **fabric.options}
+    options = fabric_options(fabric)
     vers = mf.versions()
     src = _Input(fabric)
     cache = None if store.local else tempfile.mkdtemp(prefix="kesbrdf-batch-cache-")
@@ -174,6 +174,12 @@ def run_fabric(fabric: Fabric, out: Store | str, steps, settings: dict | None = 
         src.cleanup()
     record["seconds"] = time.perf_counter() - t_start
     return record
+
+
+def fabric_options(fabric: Fabric) -> dict:
+    """A fabric's options: its catalogue row over :data:`~kesbrdf.batch.catalog.DEFAULT_OPTIONS`
+    (what :func:`~kesbrdf.batch.steps.step_params` builds every step's parameters from)."""
+    return {**DEFAULT_OPTIONS, **fabric.options}
 
 
 def _ingest_inputs(path: Path) -> tuple[list[Path], dict]:

@@ -184,14 +184,23 @@ def _compare_name(reference) -> str:
     return "sadeghi-black-satin" if isinstance(reference, Sadeghi2013) else "satin-ward"
 
 
+#: Protocols of the demo's reference-vs-model panel: the paper's, the protocol of the
+#: embedded sample.  The dense panel (``kesbrdf compare-render sadeghi-black-satin
+#: --protocol dense``, and benchmarks/bench_compare.py) cost the demo ~47 s of CPU, 31 s
+#: of it the 900-row default fit: a sixth of the demo's CPU for one image (issue 17's
+#: budget, docs/decisions.md, "The demo's compare panel").
+DEMO_COMPARE_PROTOCOLS = ("paper",)
+
+
 def _compare_rows(out: str, name: str, say=None) -> list:
     """The reference-vs-model renders of the demo, one (protocol, numbers without the
-    images, wall s, CPU s) per protocol; the panels are written (atomically) by
-    :func:`~kesbrdf.render.compare.compare_render`.  ``say`` announces each protocol."""
+    images, wall s, CPU s) per protocol of :data:`DEMO_COMPARE_PROTOCOLS`; the panels are
+    written (atomically) by :func:`~kesbrdf.render.compare.compare_render`.  ``say``
+    announces each protocol."""
     from kesbrdf.render import compare
 
     rows = []
-    for protocol in compare.PROTOCOLS:
+    for protocol in DEMO_COMPARE_PROTOCOLS:
         if say is not None:
             say(f"compare: {name} rendered by itself and by its {protocol}-protocol model")
         t0, c0 = time.perf_counter(), time.process_time()
@@ -382,15 +391,22 @@ def run(args) -> int:
         write_text(out / "validation.json", json.dumps(summary, indent=1, default=str) + "\n")
         plan_result = _demo_prior.small_plan(reference, say)
 
-    looks = None
+    looks = early_looks = None
     if not args.quick:
         exported = _attempt("exports", lambda: _exports(out, fitted, say, notes), notes, {})
-        looks = _attempt("export looks", lambda: _looks(out, model_path, exported, say), notes)
+        # the looks wait on Blender and Chromium most of their wall time: they run in a
+        # background process while this one renders, and the report collects them
+        early_looks = _attempt("export looks", lambda: _start_looks(out, model_path, exported, say), notes)
     # collected after the exports and looks: the background comparison fits its own default
     # models (a dense fibre-coord fit is ~30 CPU s), and waiting for it earlier left this
     # process idle (50 s at the plan step, measured)
     comparisons = [] if args.quick else _attempt("reference-vs-model renders",
                                                  lambda: _comparisons(out, reference, say, early_compare), notes, [])
+
+    if not args.quick:
+        _attempt("renders", lambda: _renders(out, model_path, say, drapes), notes)
+    if early_looks is not None:
+        looks = _attempt("export looks", lambda: _collect_looks(early_looks, say), notes)
 
     # figures + report
     if _have("matplotlib") and _have("kesbrdf.plotting.report"):
@@ -413,9 +429,6 @@ def run(args) -> int:
         _attempt("figures + report", lambda: outputs.report(inputs, out / "report.html"), notes)
     else:
         say("figures + report skipped (install kesbrdf[plot])")
-
-    if not args.quick:
-        _attempt("renders", lambda: _renders(out, model_path, say, drapes), notes)
 
     # library scale: 12 simulated fabrics (2 broken) on a local Dask cluster (docs/batch.md); not in --quick
     if batch_wanted:
@@ -489,18 +502,49 @@ LOOK_FORMATS = ("rgl-bsdf", "gltf", "gltf-threejs", "mtlx", "usd")
 LOOK_SOURCES = {"gltf-threejs": "gltf"}
 
 
-def _looks(out: Path, model_path: Path, exported: dict, say):
-    """Each export rendered where it is used vs the plugin render: out/exports.json and out/looks/."""
-    if not (_have("mitsuba") and _have("flip_evaluator")):
-        say("export looks skipped (install kesbrdf[render] and flip-evaluator)")
-        return None
+def _look_files(exported: dict) -> dict:
+    return {fmt: exported[LOOK_SOURCES.get(fmt, fmt)] for fmt in LOOK_FORMATS if LOOK_SOURCES.get(fmt, fmt) in exported}
+
+
+def _looks(out: str, model_path: str, files: dict, progress=None):
+    """Each export rendered where it is used vs the plugin render: out/exports.json and
+    out/looks/.  Returns (result, wall s, CPU s of this process)."""
     from kesbrdf._atomic import write_text
     from kesbrdf.export.looks import check_looks
 
-    files = {fmt: exported[LOOK_SOURCES.get(fmt, fmt)] for fmt in LOOK_FORMATS if LOOK_SOURCES.get(fmt, fmt) in exported}
-    say(f"export looks: {', '.join(files)} in their renderers vs the kesbrdf plugin (Mitsuba, Blender Cycles, three.js)")
-    result = check_looks(model_path, files, out / "looks", progress=lambda line: stderr(f"    {line}"))
-    write_text(out / "exports.json", json.dumps(result, indent=1, default=str) + "\n")
+    t0, c0 = time.perf_counter(), time.process_time()
+    result = check_looks(Path(model_path), {k: Path(v) for k, v in files.items()}, Path(out) / "looks",
+                         progress=progress)
+    write_text(Path(out) / "exports.json", json.dumps(result, indent=1, default=str) + "\n")
+    return result, time.perf_counter() - t0, time.process_time() - c0
+
+
+def _looks_in_background(out: str, model_path: str, files: dict):
+    """:func:`_looks` in a background process: (result, printed lines, wall s, CPU s)."""
+    _lower_priority()
+    lines: list[str] = []
+    result, wall, cpu = _looks(out, model_path, files, progress=lines.append)
+    return result, lines, wall, cpu
+
+
+def _start_looks(out: Path, model_path: Path, exported: dict, say):
+    """Start the export looks in a background process (None when they cannot run)."""
+    if not (_have("mitsuba") and _have("flip_evaluator")):
+        say("export looks skipped (install kesbrdf[render] and flip-evaluator)")
+        return None
+    files = _look_files(exported)
+    say(f"export looks: {', '.join(files)} in their renderers vs the kesbrdf plugin (Mitsuba, Blender Cycles, "
+        "three.js), in a background process while the stills render")
+    return _Spawned(_looks_in_background, str(out), str(model_path), {k: str(v) for k, v in files.items()})
+
+
+def _collect_looks(early: "_Spawned", say):
+    """The background looks' result, with their lines printed here."""
+    say("export looks: collected")
+    result, lines, wall, cpu = early.result()
+    for line in lines:
+        stderr(f"    {line}")
+    stderr(f"    rendered in a background process: {wall:.1f} s wall, {cpu:.1f} s of CPU (plus Blender's and Chromium's)")
     return result
 
 
@@ -509,7 +553,7 @@ def _compare_available() -> bool:
 
 
 def _comparisons(out: Path, reference, say, early: _Spawned | None = None) -> list:
-    """Reference vs model renders of the embedded fabric (paper and dense protocols).
+    """Reference vs model renders of the embedded fabric (:data:`DEMO_COMPARE_PROTOCOLS`).
 
     ``early``: the same renders started in a background process with the demo; their
     lines are printed here, with the background's wall and CPU time.

@@ -60,6 +60,34 @@ def _default_model(out: Path) -> Path:
     return path
 
 
+class _ProgressLog:
+    """Plain progress lines for a log: ``render: 20/108, 4:02 elapsed, ETA 17:40``.
+
+    One line every :attr:`LOG_EVERY` steps and at the end; the ETA extrapolates the
+    stage's mean time a step so far.
+    """
+
+    LOG_EVERY = 10
+
+    def __init__(self):
+        self.start: dict[str, tuple[float, int]] = {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        now = time.perf_counter()
+        t0, d0 = self.start.setdefault(stage, (now, done))
+        if not (done == total or (done > d0 and done % self.LOG_EVERY == 0)):
+            return
+        elapsed = now - t0
+        rate = elapsed / (done - d0) if done > d0 else None
+        eta = "" if rate is None or done >= total else f", ETA {_clock(rate * (total - done))}"
+        stderr(f"{stage}: {done}/{total}, {_clock(elapsed)} elapsed{eta}")
+
+
+def _clock(seconds: float) -> str:
+    m, s = divmod(int(round(seconds)), 60)
+    return f"{m}:{s:02d}"
+
+
 def run(args) -> int:
     from kesbrdf.render import showcase
 
@@ -88,18 +116,26 @@ def run(args) -> int:
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                TextColumn("ETA"), TimeRemainingColumn())
     times: dict = {}
-    with Progress(*columns, console=Console(stderr=True)) as bar:
+    console = Console(stderr=True)
+    # rich draws its bar on a terminal only: into a log (CI, nohup, a pipe) the progress
+    # goes as a plain line every LOG_EVERY-th step, with the elapsed time and an ETA
+    log = None if console.is_terminal else _ProgressLog()
+    with Progress(*columns, console=console) as bar:
         sim = bar.add_task(f"simulate (cloth {spec.cloth_resolution}, {spec.sim_frames} frames)", total=spec.sim_frames)
         ren = bar.add_task(f"render {spec.size[0]}x{spec.size[1]} {spec.spp} spp + OIDN", total=None, start=False)
 
         def sim_progress(done, total):
             bar.update(sim, completed=done, total=total)
+            if log is not None:
+                log("simulate", done, total)
 
         def render_progress(done, total, skipped):
             if "render_start" not in times:
                 times["render_start"] = time.perf_counter()
                 bar.start_task(ren)
             bar.update(ren, completed=done, total=total)
+            if log is not None:
+                log("render", done, total)
 
         t_sim = time.perf_counter()
 

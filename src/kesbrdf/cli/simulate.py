@@ -26,9 +26,23 @@ def add_arguments(p):
     # batch: a synthetic fabric library (kesbrdf.batch.library); -o is then a folder
     p.add_argument("--library", type=int, metavar="N", help="write N varied fabrics + catalog.csv into the folder -o")
     p.add_argument("--broken", type=int, default=2, help="with --library: deliberately broken fabrics (default 2)")
+    # the synthetic fabric library of five families (kesbrdf.batch.fabric_library); -o is a folder
+    p.add_argument("--fabric-library", type=int, metavar="N",
+                   help="build the seeded library of N synthetic fabrics (five families, measurements and truths) "
+                        "into the folder -o on a local Dask cluster; cached per shard (docs/validation.md)")
+    p.add_argument("--families", metavar="A,B",
+                   help="with --fabric-library: comma-separated families (default: irawan2012, sadeghi2013, ward, "
+                        "ashikhmin_shirley, ggx)")
+    p.add_argument("--shard-size", type=int, default=None, metavar="K",
+                   help="with --fabric-library: fabrics per shard / Dask task (default 50)")
+    p.add_argument("--workers", type=int, default=2,
+                   help="with --fabric-library: local Dask worker processes (default 2; 0: serial in this process)")
+    p.add_argument("--no-progress", action="store_true", help="with --fabric-library: no progress bar")
 
 
 def run(args) -> int:
+    if getattr(args, "fabric_library", None) is not None:
+        return _run_fabric_library(args)
     if getattr(args, "library", None) is not None:
         return _run_library(args)
     from kesbrdf.errors import KesbrdfError
@@ -79,4 +93,57 @@ def _run_library(args) -> int:
     check_output(args.output, folder=True)
     catalog = simulate_library(args.library, args.output, seed=args.seed, broken=args.broken)
     stderr(f"wrote {args.library} fabric(s) + {args.broken} broken one(s) and the catalogue {catalog}")
+    return 0
+
+
+class _ShardBar:
+    """tqdm bar over fabrics (the batch runner's kind of progress line)."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled
+        self.bar = None
+
+    def __call__(self, ev):
+        if ev["event"] == "start":
+            where = f"on {ev['workers']} Dask worker(s)" if ev["workers"] else "serially"
+            todo = ev["shards"] - ev["cached"]
+            stderr(f"fabric library: {ev['fabrics']} fabric(s) in {ev['shards']} shard(s), {ev['cached']} cached, "
+                   f"{todo} to build" + (f" {where}" if todo else ""))
+            if self.enabled and todo:
+                from tqdm import tqdm
+
+                self.bar = tqdm(total=ev["fabrics"], unit="fabric", dynamic_ncols=True, smoothing=0.1)
+            return
+        if self.bar is not None:
+            self.bar.set_postfix(shards=f"{ev['done']}/{ev['total']}", refresh=False)
+            self.bar.update(ev["fabrics"] - self.bar.n)
+
+    def close(self):
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _run_fabric_library(args) -> int:
+    from kesbrdf.batch.fabric_library import DEFAULT_SHARD_SIZE, build_fabric_library
+    from kesbrdf.errors import KesbrdfError
+    from kesbrdf.validate.library import LIBRARY_FAMILIES, check_families
+
+    if args.library is not None:
+        raise KesbrdfError("--fabric-library: expected it without --library (a batch catalogue), got both")
+    check_output(args.output, folder=True)
+    families = LIBRARY_FAMILIES
+    if args.families is not None:
+        families = check_families((f.strip() for f in args.families.split(",") if f.strip()), flag="--families")
+    bar = _ShardBar(not args.no_progress)
+    try:
+        man = build_fabric_library(args.output, args.fabric_library, seed=args.seed, families=families,
+                                   shard_size=DEFAULT_SHARD_SIZE if args.shard_size is None else args.shard_size,
+                                   workers=args.workers, progress=bar)
+    finally:
+        bar.close()
+    b = man["run"]
+    stderr(f"fabric library {args.output}: {man['n']} fabric(s) of {len(man['families'])} families, "
+           f"{b['shards_built']} shard(s) built, {b['shards_cached']} cached, {b['seconds']:.1f} s wall, "
+           f"{b['cpu_seconds_shards'] + b['cpu_seconds_driver']:.1f} s CPU")
+    stderr(f"sha256 {man['sha256']}")
     return 0

@@ -56,6 +56,13 @@ PARAMETERS: dict[str, dict[str, tuple]] = {
         "R_s": _channels(0.0, 1.0),
         "R_d": _channels(0.0, 1.0),
     },
+    "ggx": {
+        "alpha_x": _number(1e-3, 1.0),
+        "alpha_y": _number(1e-3, 1.0),
+        "eta": _number(1.0, 3.0, lo_open=True),
+        "rho_d": _channels(0.0, 1.0),
+        "k_s": _channels(0.0, 1.0),
+    },
     "sadeghi-satin": _SADEGHI,
     "sadeghi-black-satin": {**_SADEGHI, "dye_factor": _number(0.0, 1.0)},
     **{f"sadeghi-{p}": _SADEGHI for p in ("linen", "silk-crepe", "satin-back", "silk-shot", "velvet")},
@@ -135,7 +142,7 @@ def parse_params(reference: str, text: str | None, flag: str = "--params") -> di
             expected = f"expected some of {', '.join(spec)}" if spec else "it takes none"
             raise KesbrdfError(f"{flag}: unknown parameter {name!r} of reference {reference}; {expected}")
         _check(reference, name, value, spec[name], flag)
-    if reference in ("ward", "satin-ward", "isotropic", "ashikhmin-shirley"):
+    if reference in ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "ggx"):
         per_channel = [k for k, s in spec.items() if s[0] == "channels" and isinstance(doc.get(k), list)]
         sizes = {len(doc[k]) for k in per_channel if len(doc[k]) > 1}
         if len(sizes) > 1:

@@ -10,6 +10,9 @@ Names
     Anisotropic Ward (:mod:`kesbrdf.references.ward`) with the defaults below.
 ``ashikhmin-shirley``
     :mod:`kesbrdf.references.ashikhmin_shirley`.
+``ggx``
+    Anisotropic GGX microfacet lobe over a Lambertian body
+    (:mod:`kesbrdf.references.ggx`), a non-fibre control.
 ``sadeghi-<preset>``
     Sadeghi et al. 2013 microcylinder presets (Table II), and ``sadeghi-black-satin``,
     the embedded demo fabric (:func:`kesbrdf.references.sadeghi2013.black_satin`).
@@ -52,7 +55,7 @@ RGL_DIRS = tuple(
 
 #: References that need no data file and no renderer (numpy only).
 ANALYTIC_REFERENCES = (
-    ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "sadeghi-satin", "sadeghi-black-satin")
+    ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "ggx", "sadeghi-satin", "sadeghi-black-satin")
     + tuple(f"sadeghi-{p.replace('_', '-')}" for p in _SADEGHI_PRESETS if p != "satin")
 )
 #: Every reference name, in the order the CLI lists them.
@@ -142,6 +145,11 @@ def _build(name: str, extra: dict):
         from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
 
         return AshikhminShirley(**{"n_u": 50.0, "n_v": 400.0, "R_s": 0.1, "R_d": [0.3, 0.25, 0.2], **extra})
+    if name == "ggx":
+        from kesbrdf.references.ggx import AnisotropicGGX
+
+        return AnisotropicGGX(**{"alpha_x": 0.15, "alpha_y": 0.35, "eta": 1.5, "rho_d": [0.3, 0.22, 0.15],
+                                 "k_s": 1.0, **extra})
     if name == "sadeghi-black-satin":
         from kesbrdf.references import sadeghi2013
 

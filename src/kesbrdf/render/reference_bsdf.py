@@ -10,6 +10,8 @@ rendered with the reference itself; this module makes each reference a Mitsuba B
   - anisotropic Ward (:class:`kesbrdf.references.ward.AnisotropicWard`, Ward 1992 eq. 5);
   - Ashikhmin–Shirley (:class:`kesbrdf.references.ashikhmin_shirley.AshikhminShirley`,
     eqs. 1–5);
+  - anisotropic GGX over a Lambertian body (:class:`kesbrdf.references.ggx.AnisotropicGGX`,
+    Walter et al. 2007 eq. 20 with Heitz 2014 eqs. 85, 86, 99);
   - the Sadeghi et al. 2013 microcylinder cloth model
     (:class:`kesbrdf.references.sadeghi2013.Sadeghi2013`: Eqs. 2–15 as that module
     reads them, reciprocal or published form, the same tangent samples).  The sum over
@@ -124,6 +126,29 @@ def _ashikhmin_shirley(ref):
     return f
 
 
+def _ggx(ref):
+    """Anisotropic GGX + Lambertian body (see :mod:`kesbrdf.references.ggx`)."""
+    ax, ay, eta = ref.alpha_x, ref.alpha_y, ref.eta
+    rho_d = _rgb(ref.rho_d)
+    k_s = _rgb(ref.k_s)
+
+    def lam(w):
+        return 0.5 * (dr.sqrt(1.0 + (dr.square(ax * w.x) + dr.square(ay * w.y)) / dr.maximum(dr.square(w.z), 1e-30))
+                      - 1.0)
+
+    def f(wi, wr):
+        h = dr.normalize(wi + wr)
+        q = dr.square(h.x / ax) + dr.square(h.y / ay) + dr.square(h.z)
+        d = 1.0 / (math.pi * ax * ay * dr.square(q))
+        g2 = 1.0 / (1.0 + lam(wi) + lam(wr))
+        fres = fresnel_dielectric(dr.dot(wi, h), eta, dr)
+        spec = fres * d * g2 / (4.0 * dr.maximum(wi.z * wr.z, 1e-30))
+        body = (1.0 - fresnel_dielectric(wi.z, eta, dr)) * (1.0 - fresnel_dielectric(wr.z, eta, dr))
+        return k_s * spec + rho_d * (body / math.pi)
+
+    return f
+
+
 def _gaussian(g, x):
     return dr.exp(x * x * (-1.0 / (2.0 * g * g))) * (1.0 / (math.sqrt(2.0 * math.pi) * g))
 
@@ -233,6 +258,7 @@ def _sadeghi(ref):
 def reference_f_r(ref):
     """Dr.Jit ``f(wi, wr) -> Color3f`` (1/sr, no cosine, upper hemisphere) of a numpy reference."""
     from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
+    from kesbrdf.references.ggx import AnisotropicGGX
     from kesbrdf.references.sadeghi2013 import Sadeghi2013
     from kesbrdf.references.ward import AnisotropicWard
 
@@ -240,10 +266,12 @@ def reference_f_r(ref):
         return _ward(ref)
     if isinstance(ref, AshikhminShirley):
         return _ashikhmin_shirley(ref)
+    if isinstance(ref, AnisotropicGGX):
+        return _ggx(ref)
     if isinstance(ref, Sadeghi2013):
         return _sadeghi(ref)
     raise KesbrdfError(
-        f"reference BSDF: expected a Ward, Ashikhmin-Shirley or Sadeghi2013 reference, got {type(ref).__name__}"
+        f"reference BSDF: expected a Ward, Ashikhmin-Shirley, GGX or Sadeghi2013 reference, got {type(ref).__name__}"
     )
 
 

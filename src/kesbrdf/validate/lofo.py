@@ -24,6 +24,13 @@ point with the lowest summed score on every *other* family, and it is then appli
 F.  Nothing here knows any fitter: the benchmark (benchmarks/bench_lofo.py) passes
 them in, so this module sits in the validation layer below ``kesbrdf.fit``.
 
+The fabrics may also come from the built synthetic fabric library of 2,000+ fabrics
+over five families (:mod:`kesbrdf.validate.library`, ``kesbrdf simulate
+--fabric-library``): :func:`family_library_from` draws a stratified subsample of it in
+the structure :func:`family_library` returns, and :func:`library_inputs` hands
+:func:`run_lofo` the library's stored measurements and truths, so nothing is simulated
+again.  A fit costs 10-30 s, so a sweep uses a few fabrics per family, not all 2,000.
+
 Microflake / SGGX volumetric cloth (SpongeCake and relatives) is never a family here:
 it is kept for an independent held-out check.
 """
@@ -39,13 +46,14 @@ import numpy as np
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.measure.gonio import measure
 from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
+from kesbrdf.validate.library import NOISE as LIBRARY_NOISE
 
-__all__ = ["FAMILIES", "NOISE", "PROTOCOLS", "family_library", "score", "fit_and_score", "run_lofo",
-           "choose_lofo", "family_table", "FORBIDDEN_FAMILIES"]
+__all__ = ["FAMILIES", "NOISE", "PROTOCOLS", "family_library", "family_library_from", "library_inputs", "score",
+           "fit_and_score", "run_lofo", "choose_lofo", "family_table", "FORBIDDEN_FAMILIES"]
 
 #: Multiplicative noise of the simulated measurements (σ = 2 % of the value), as in
-#: benchmarks/bench_selection.py.
-NOISE = 0.02
+#: benchmarks/bench_selection.py; one value with the fabric library's.
+NOISE = LIBRARY_NOISE
 #: Protocols compared on the same fabric.
 PROTOCOLS = ("paper", "dense")
 #: Families of :func:`family_library`, in report order.
@@ -146,6 +154,37 @@ def family_library(draws: int = 3, seed: int = 20, families=FAMILIES) -> dict:
     return lib
 
 
+def family_library_from(library, per_family: int = 1, seed: int = 0, families=None) -> dict:
+    """{family: {fabric name: reference BRDF}} of ``per_family`` fabrics per family drawn
+    (seeded, without replacement) from a built fabric library (a folder or a
+    :class:`kesbrdf.validate.library.FabricLibrary`); the structure of :func:`family_library`."""
+    from kesbrdf.validate.library import FabricLibrary, load_library, stratified
+
+    lib = library if isinstance(library, FabricLibrary) else load_library(library)
+    if families is not None:
+        bad = [f for f in families if any(x in f.lower() for x in FORBIDDEN_FAMILIES)]
+        if bad:
+            raise ValueError(f"families: microflake/SGGX cloth is kept for an independent check, got {bad}")
+    pick = stratified(lib, per_family, seed, families)
+    return {fam: {lib.specs[k]["name"]: lib.reference(k) for k in idx} for fam, idx in pick.items()}
+
+
+def library_inputs(library, refs: dict, protocols=PROTOCOLS) -> dict:
+    """{family: {fabric: {"tests": truths, protocol: Measurement}}} of the fabrics of ``refs``
+    (from :func:`family_library_from`), read from the library: :func:`run_lofo`'s ``data``."""
+    from kesbrdf.validate.library import FabricLibrary, load_library
+
+    lib = library if isinstance(library, FabricLibrary) else load_library(library)
+    index = {s["name"]: s["index"] for s in lib.specs}
+    out = {}
+    for fam, fabs in refs.items():
+        out[fam] = {}
+        for name in fabs:
+            k = index[name]
+            out[fam][name] = {"tests": lib.truths(k), **{p: lib.measurement(k, p) for p in protocols}}
+    return out
+
+
 def _test_sets(ref) -> dict:
     held = measure(ref, orientations_deg=HELD_OUT_DEG)
     wr, _, _ = hemisphere_directions()
@@ -168,12 +207,14 @@ def score(predict, ref, tests=None) -> dict:
     return out
 
 
-def fit_and_score(ref, fitters: dict, protocol: str = "paper", seed: int = 0, tests=None) -> dict:
+def fit_and_score(ref, fitters: dict, protocol: str = "paper", seed: int = 0, tests=None, measurement=None) -> dict:
     """{fitter: score + ``fit_cpu_s`` + ``kind``} of every fitter on one fabric and protocol.
 
+    ``measurement`` (optional): the simulated measurement to fit (e.g. the fabric
+    library's); by default ``measure(ref, protocol, noise=NOISE, rng=seed)``.
     A fitter that raises is recorded as ``{"error": one line}`` (it is a result, not a crash).
     """
-    m = measure(ref, protocol=protocol, noise=NOISE, rng=seed)
+    m = measurement if measurement is not None else measure(ref, protocol=protocol, noise=NOISE, rng=seed)
     tests = tests or _test_sets(ref)
     out = {}
     for name, fitter in fitters.items():
@@ -198,8 +239,11 @@ def fit_and_score(ref, fitters: dict, protocol: str = "paper", seed: int = 0, te
     return out
 
 
-def run_lofo(library: dict, fitters: dict, protocols=PROTOCOLS, progress=None, cache=None) -> dict:
+def run_lofo(library: dict, fitters: dict, protocols=PROTOCOLS, progress=None, cache=None, data=None) -> dict:
     """Every fitter on every fabric and protocol: ``{family: {fabric: {protocol: {fitter: row}}}}``.
+
+    ``data`` (optional, :func:`library_inputs`): per fabric, the stored truths and
+    measurements to use instead of simulating them.
 
     ``cache`` (a dict, e.g. loaded from JSON) is filled and reused by
     ``family/fabric/protocol/fitter`` key, so an interrupted sweep resumes.  The rows
@@ -211,12 +255,14 @@ def run_lofo(library: dict, fitters: dict, protocols=PROTOCOLS, progress=None, c
         out[fam] = {}
         for j, (name, ref) in enumerate(refs.items()):
             out[fam][name] = {}
-            tests = None
+            given = (data or {}).get(fam, {}).get(name, {})
+            tests = given.get("tests")
             for p, protocol in enumerate(protocols):
                 todo = {n: f for n, f in fitters.items() if f"{fam}/{name}/{protocol}/{n}" not in cache}
                 if todo:
                     tests = tests or _test_sets(ref)
-                    rows = fit_and_score(ref, todo, protocol, seed=1000 * k + 10 * j + p, tests=tests)
+                    rows = fit_and_score(ref, todo, protocol, seed=1000 * k + 10 * j + p, tests=tests,
+                                         measurement=given.get(protocol))
                     for n, row in rows.items():
                         cache[f"{fam}/{name}/{protocol}/{n}"] = row
                     if progress:
