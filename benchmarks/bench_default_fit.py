@@ -64,6 +64,13 @@ def reference_workload() -> float:
 
 
 def _one_thread():
+    # the BLAS libraries must be loaded before the limit is set (threadpoolctl limits the
+    # loaded ones): numpy's, and scipy's own, which the fitters import on first use
+    import scipy.linalg  # noqa: F401
+    import scipy.optimize  # noqa: F401
+
+    from kesbrdf.models import fibre_coord, fibre_physics  # noqa: F401
+
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # threadpoolctl comes with kesbrdf[export]; without it, OPENBLAS_NUM_THREADS=1
