@@ -83,3 +83,20 @@ def test_rejects_a_start_outside_the_bounds():
     fun, jac = _exp_problem(0)
     with pytest.raises(ValueError, match="outside"):
         least_squares_lsmr(fun, np.array([2.0, 1.0, 0.5, 0.1]), jac, (np.zeros(4), np.ones(4)), 10)
+
+
+def test_lsmr_float_scalars_match_numpy_scalars():
+    """LSMR's recurrences on Python floats give SciPy's float64-scalar bits (and NaN takes the NumPy path)."""
+    from kesbrdf.models import trf_dense as td
+
+    rng = np.random.default_rng(7)
+    for k in range(20):
+        m, n = 30 + k, 5 + k % 7
+        Jh = td._ScaledJacobian(rng.normal(size=(m, n)) * np.exp(rng.normal(size=n)), rng.uniform(0.1, 2.0, n))
+        reg = rng.uniform(0.0, 1.0, n) * (k % 3 != 0)  # some without regularisation
+        b = np.concatenate([rng.normal(size=m), np.zeros(n)])
+        fast = td._lsmr_run(Jh, reg, b, 1e-6, 1e-6, 1e8, td._float_norm, td._float_sign)
+        slow = td._lsmr_run(Jh, reg, b, 1e-6, 1e-6, 1e8, td._norm, np.sign)
+        assert np.array_equal(fast, slow)
+    with pytest.raises(td._LeaveFastPath):
+        td._float_sign(float("nan"))

@@ -256,26 +256,56 @@ def _cho_solve(c_and_lower, g):
 
 # -- LSMR (scipy/sparse/linalg/_isolve/lsmr.py) on [J diag(d); diag(reg)] -----------------
 
-def _sym_ortho(a, b):
+def _sym_ortho(a, b, sign=np.sign):
     if b == 0:
-        return np.sign(a), 0, abs(a)
+        return sign(a), 0, abs(a)
     elif a == 0:
-        return 0, np.sign(b), abs(b)
+        return 0, sign(b), abs(b)
     elif abs(b) > abs(a):
         tau = a / b
-        s = np.sign(b) / math.sqrt(1 + tau * tau)
+        s = sign(b) / math.sqrt(1 + tau * tau)
         c = s * tau
         r = b / s
     else:
         tau = b / a
-        c = np.sign(a) / math.sqrt(1 + tau * tau)
+        c = sign(a) / math.sqrt(1 + tau * tau)
         s = c * tau
         r = a / c
     return c, s, r
 
 
+def _float_sign(a):
+    """np.sign of a finite float as a Python float (a NaN leaves the fast path: :func:`_lsmr`)."""
+    if a != a:
+        raise _LeaveFastPath
+    return 1.0 if a > 0 else (-1.0 if a < 0 else 0.0)
+
+
+def _float_norm(x):
+    """:func:`_norm` as a Python float (the same correctly rounded sqrt of the same x·x)."""
+    return math.sqrt(float(x.dot(x)))
+
+
+class _LeaveFastPath(Exception):
+    pass
+
+
 def _lsmr(Jh, reg, b, atol=1e-6, btol=1e-6, conlim=1e8):
-    """x minimising |[Jh; diag(reg)] x − b| (LSMR, damp 0, x0 = 0, maxiter = n)."""
+    """x minimising |[Jh; diag(reg)] x − b| (LSMR, damp 0, x0 = 0, maxiter = n).
+
+    SciPy's recurrences run on NumPy float64 scalars; the same IEEE operations on Python
+    floats give the same bits at a third of the cost.  Where the two differ (a division by
+    zero, an overflow or a NaN: NumPy gives inf/NaN, Python raises) the solve is redone on
+    NumPy scalars, as SciPy does it.
+    """
+    try:
+        return _lsmr_run(Jh, reg, b, atol, btol, conlim, _float_norm, _float_sign)
+    except (ZeroDivisionError, OverflowError, ValueError, _LeaveFastPath):
+        return _lsmr_run(Jh, reg, b, atol, btol, conlim, _norm, np.sign)
+
+
+def _lsmr_run(Jh, reg, b, atol, btol, conlim, norm, sign):
+    """The LSMR iterations of :func:`_lsmr` with the given norm and sign (their scalar type)."""
     m, n = Jh.m, Jh.n
 
     def matvec(x):  # regularized_lsq_operator's matvec: [Jh x; reg x]
@@ -289,13 +319,13 @@ def _lsmr(Jh, reg, b, atol=1e-6, btol=1e-6, conlim=1e8):
 
     maxiter = min(m + n, n)
     u = b
-    normb = _norm(b)
+    normb = norm(b)
     x = np.zeros(n, float)
-    beta = normb.copy()
+    beta = normb
     if beta > 0:
         u = (1 / beta) * u
         v = rmatvec(u)
-        alpha = _norm(v)
+        alpha = norm(v)
     else:
         v = np.zeros(n, float)
         alpha = 0
@@ -336,24 +366,24 @@ def _lsmr(Jh, reg, b, atol=1e-6, btol=1e-6, conlim=1e8):
         itn = itn + 1
         u *= -alpha
         u += matvec(v)
-        beta = _norm(u)
+        beta = norm(u)
         if beta > 0:
             u *= 1 / beta
             v *= -beta
             v += rmatvec(u)
-            alpha = _norm(v)
+            alpha = norm(v)
             if alpha > 0:
                 v *= 1 / alpha
-        chat, shat, alphahat = _sym_ortho(alphabar, 0.0)
+        chat, shat, alphahat = _sym_ortho(alphabar, 0.0, sign)
         rhoold = rho
-        c, s, rho = _sym_ortho(alphahat, beta)
+        c, s, rho = _sym_ortho(alphahat, beta, sign)
         thetanew = s * alpha
         alphabar = c * alpha
         rhobarold = rhobar
         zetaold = zeta
         thetabar = sbar * rho
         rhotemp = cbar * rho
-        cbar, sbar, rhobar = _sym_ortho(cbar * rho, thetanew)
+        cbar, sbar, rhobar = _sym_ortho(cbar * rho, thetanew, sign)
         zeta = cbar * zetabar
         zetabar = -sbar * zetabar
         hbar *= -(thetabar * rho / (rhoold * rhobarold))
@@ -366,7 +396,7 @@ def _lsmr(Jh, reg, b, atol=1e-6, btol=1e-6, conlim=1e8):
         betahat = c * betaacute
         betadd = -s * betaacute
         thetatildeold = thetatilde
-        ctildeold, stildeold, rhotildeold = _sym_ortho(rhodold, thetabar)
+        ctildeold, stildeold, rhotildeold = _sym_ortho(rhodold, thetabar, sign)
         thetatilde = stildeold * rhobar
         rhodold = ctildeold * rhobar
         betad = -stildeold * betad + ctildeold * betahat
@@ -382,12 +412,12 @@ def _lsmr(Jh, reg, b, atol=1e-6, btol=1e-6, conlim=1e8):
             minrbar = min(minrbar, rhobarold)
         condA = max(maxrbar, rhotemp) / min(minrbar, rhotemp)
         normar = abs(zetabar)
-        normx = _norm(x)
+        normx = norm(x)
         test1 = normr / normb
         if (normA * normr) != 0:
             test2 = normar / (normA * normr)
         else:
-            test2 = np.inf
+            test2 = math.inf
         test3 = 1 / condA
         t1 = test1 / (1 + normA * normx / normb)
         rtol = btol + atol * normA * normx / normb
