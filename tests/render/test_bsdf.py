@@ -152,3 +152,34 @@ def test_model_with_two_channels_is_rejected_before_mitsuba(render_module, tmp_p
     fit(measure(AnisotropicWard(0.1, 0.2, rho_d=[0.1, 0.2], rho_s=0.1))).save(path)
     with pytest.raises(ModelError, match="1 \\(grey\\) or 3 \\(RGB\\) channels, got 2"):
         check_model(path)
+
+
+def test_a_new_body_colour_reuses_the_compiled_kernel(render_module, model_files):
+    """The fabric's numbers are opaque kernel parameters (kesbrdf.render.jit): a scene
+    that differs only in the body colour (a colourway, the next fabric of a batch)
+    launches the kernels already compiled.  With the colour as a literal the render
+    kernel was traced anew and compiled again (~5 s of CPU a studio scene)."""
+    import drjit as dr
+    import mitsuba as mi
+
+    path, _ = model_files["rgb"]
+
+    def render(colour):
+        scene = mi.load_dict({
+            "type": "scene", "integrator": {"type": "path", "max_depth": 2}, "light": {"type": "constant"},
+            "sensor": {"type": "perspective", "film": {"type": "hdrfilm", "width": 8, "height": 8},
+                       "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 3], target=[0, 0, 0], up=[0, 1, 0])},
+            "cloth": {"type": "sphere", "bsdf": {"type": "kesbrdf", "filename": str(path), "base_color": colour}}})
+        return mi.render(scene, spp=2)
+
+    was = dr.flag(dr.JitFlag.KernelHistory)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        render("0.2,0.3,0.4")
+        dr.kernel_history()  # clears it
+        img = render("0.6,0.1,0.1")
+        launched = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, was)
+    assert np.asarray(img).max() > 0  # it rendered
+    assert launched and all(k["cache_hit"] for k in launched), [(k["hash"], k["cache_hit"]) for k in launched]

@@ -70,6 +70,7 @@ import mitsuba as mi
 from kesbrdf.errors import ModelError, validate_choice, where
 from kesbrdf.models.mappings import BOUNDED_LAMBDA, FADE_DEG  # noqa: F401  (FADE_DEG re-exported)
 from kesbrdf.render import sampling as _sampling
+from kesbrdf.render.jit import opaque_float, opaque_rgb
 
 __all__ = ["FabricBSDF", "KesBSDF", "KesTable", "phi_gamma", "foreshortening", "register", "MAPPINGS", "SAMPLINGS", "parse_rgb", "model_rgb", "check_model"]
 
@@ -183,6 +184,7 @@ class KesTable:
         self.n_phi, self.n_gamma = table.shape[:2]
         self.gamma_max = float(gamma_grid[-1])
         self.dgamma = float(gamma_grid[1] - gamma_grid[0])
+        self._gamma_max, self._inv_dgamma = opaque_float(self.gamma_max), opaque_float(1.0 / self.dgamma)
         padded = np.concatenate([table, table[:1]], axis=0).astype(np.float32)
         self.texture = mi.Texture2f(
             mi.TensorXf(padded), use_accel=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp
@@ -191,7 +193,7 @@ class KesTable:
     def __call__(self, phi, gamma):
         """q(φ, γ) → Color3f."""
         u = dr.clip(phi * (self.n_phi / (2.0 * math.pi)), 0.0, float(self.n_phi))
-        v = dr.clip(gamma, 0.0, self.gamma_max) * (1.0 / self.dgamma)
+        v = dr.clip(gamma, 0.0, self._gamma_max) * self._inv_dgamma
         v = dr.clip(v, 0.0, float(self.n_gamma - 1))
         pos = mi.Point2f((v + 0.5) / self.n_gamma, (u + 0.5) / (self.n_phi + 1))
         r, g, b = self.texture.eval(pos)
@@ -337,7 +339,8 @@ class KesBSDF(FabricBSDF):
         self.table = KesTable(table, model.gamma_grid)
         self.normalisation = model.normalisation
         self.gamma_max = self.table.gamma_max
-        self.body = mi.Color3f(*[float(b) for b in body])
+        self._gamma_max = opaque_float(self.gamma_max)
+        self.body = opaque_rgb(body)
 
         self.sampling = sampling
         self.sampler = self._table_sampler(table.mean(axis=-1), model.phi_grid, model.gamma_grid, body, sampling, mapping)
@@ -352,7 +355,7 @@ class KesBSDF(FabricBSDF):
         """Bilinear table lookup q(φ, γ) → Color3f (formats.md step 2)."""
         q = self.table(phi, gamma)
         if self.extrapolation == "fade":
-            q = q * dr.clip(1.0 - (gamma - self.gamma_max) * (1.0 / math.radians(FADE_DEG)), 0.0, 1.0)
+            q = q * dr.clip(1.0 - (gamma - self._gamma_max) * (1.0 / math.radians(FADE_DEG)), 0.0, 1.0)
         return q
 
     def f_r(self, wi, wr, active=True):

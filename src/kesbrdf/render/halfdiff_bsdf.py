@@ -39,6 +39,7 @@ import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
 from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, foreshortening, parse_rgb
+from kesbrdf.render.jit import opaque_rgb
 
 __all__ = ["HalfDiffBSDF", "HalfDiffTable", "half_diff", "register", "check_halfdiff_model"]
 
@@ -137,7 +138,7 @@ class HalfDiffBSDF(FabricBSDF):
             )
         self.table = HalfDiffTable(table, model.theta_h_grid, model.theta_d_grid)
         self.h_max = self.table.h_max
-        self.body = mi.Color3f(*[float(b) for b in body])
+        self.body = opaque_rgb(body)  # one compiled kernel for every body colour (render.jit)
 
         sampling = str(_prop(props, "sampling", "lobe"))
         q_mean = table.mean(axis=(2, 3))  # (φ_h, θ_h)

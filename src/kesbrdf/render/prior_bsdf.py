@@ -58,6 +58,7 @@ from kesbrdf.errors import ModelError, where
 from kesbrdf.optics import fresnel_dielectric
 from kesbrdf.render.bsdf import EXTRAPOLATIONS, SAMPLINGS, FabricBSDF, KesTable, parse_rgb, phi_gamma
 from kesbrdf.render.halfdiff_bsdf import HalfDiffTable, half_diff
+from kesbrdf.render.jit import opaque_rgb
 
 __all__ = ["FibrePriorBSDF", "PriorDrJit", "family_frame", "as_rgb", "register", "check_prior_model", "lobe_table",
            "PLUGIN"]
@@ -363,9 +364,8 @@ class FibrePriorBSDF(FabricBSDF):
                 raise ModelError(f"base_color: expected a body albedo with R,G,B in [0, 1], got {base!r}")
             body = albedo / math.pi
         self.recolour = base is not None or not np.all(tint == 1.0)
-        self.kd = mi.Color3f(*[float(k) for k in kd])
-        self.body = mi.Color3f(*[float(b) for b in body])
-        self.tint = mi.Color3f(*[float(t) for t in tint])
+        # opaque: a colourway sheet (one body colour a tile) compiles its scene once (render.jit)
+        self.kd, self.body, self.tint = opaque_rgb(kd), opaque_rgb(body), opaque_rgb(tint)
 
         q_mean, phi_grid, gamma_grid = lobe_table(model)
         q_mean = q_mean * float(np.mean(tint))

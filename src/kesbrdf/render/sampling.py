@@ -52,6 +52,8 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
+from kesbrdf.render.jit import opaque_float
+
 __all__ = ["LobeSampler", "lobe_density_table", "lobe_weight", "alias_table", "MIN_LOBE_WEIGHT", "MAX_LOBE_WEIGHT"]
 
 #: Smallest / largest probability of the lobe component (keeps both techniques alive).
@@ -168,6 +170,10 @@ class LobeSampler:
         self.cos_hi = mi.Float(cos_edges[1:].astype(np.float32))
         self.polar_scale = scale
         self.n_cells = n_phi * n_gamma
+        # the fabric's numbers enter the kernel as opaque parameters, not literals, so one
+        # compiled kernel serves every fabric and colourway of a scene (render.jit)
+        self._w = opaque_float(self.lobe_weight)
+        self._t_scale = opaque_float(self.n_gamma / (self.gamma_max * self.polar_scale))
 
     # -- frames -----------------------------------------------------------------
     @staticmethod
@@ -204,7 +210,7 @@ class LobeSampler:
     def _cell_pdf(self, phi, polar):
         """Solid-angle pdf of the cell holding (φ, polar angle), 0 beyond the table."""
         j = mi.UInt32(dr.clip(dr.floor(phi * (self.n_phi / (2.0 * math.pi))), 0, self.n_phi - 1))
-        t = polar * (self.n_gamma / (self.gamma_max * self.polar_scale))
+        t = polar * self._t_scale
         k = mi.UInt32(dr.clip(dr.floor(t), 0, self.n_gamma - 1))
         inside = (t >= 0.0) & (t < self.n_gamma)
         return dr.select(inside, dr.gather(mi.Float, self.cell_pdf, j * self.n_gamma + k), 0.0)
@@ -248,7 +254,7 @@ class LobeSampler:
 
         Returns ``(wi, pdf, from_lobe)``; ``pdf`` is the mixture pdf (solid angle).
         """
-        from_lobe = u1 < self.lobe_weight
+        from_lobe = u1 < self._w
         wi_cos = mi.warp.square_to_cosine_hemisphere(u2)
         if self.lobe_weight > 0.0:
             wi_lobe = self._sample_lobe(wr, u2)
@@ -263,5 +269,5 @@ class LobeSampler:
         if self.lobe_weight <= 0.0:
             return p_cos
         p_lobe = self._pdf_lobe(wr, wi)
-        p = self.lobe_weight * p_lobe + (1.0 - self.lobe_weight) * p_cos
+        p = self._w * p_lobe + (1.0 - self._w) * p_cos
         return dr.select(wi.z > 0.0, p, 0.0)
