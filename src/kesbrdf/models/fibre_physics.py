@@ -61,11 +61,11 @@ from collections import ChainMap
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from kesbrdf.errors import MeasurementError
 from kesbrdf.models.body import log_body_upper
 from kesbrdf.models.mappings import evaluate_pairs
-from kesbrdf.models.trf_dense import least_squares_lsmr
 from kesbrdf.optics import fresnel_dielectric
 
 __all__ = [
@@ -703,11 +703,13 @@ def _solve(spec, x0, d: _Data, bounds, max_nfev):
     def jac(x):
         return _residual_jacobian(spec, x, d)[1]
 
-    # scipy's least_squares(method="trf", x_scale="jac", tr_solver="lsmr") step for step
-    # (kesbrdf.models.trf_dense: bit-identical, without the LinearOperator layers that cost
-    # 45 % of a fit).  lsmr: the dense SVD of the "exact" solver took 0.5 s per iteration for
-    # 2700 residuals with threaded BLAS on a loaded 2-core machine; lsmr gives the same optimum 10x faster
-    return least_squares_lsmr(fun, x0, jac, (lo, hi), max_nfev, ftol=1e-8, xtol=1e-8, gtol=1e-8)
+    # lsmr: the dense SVD of the default solver took 0.5 s per iteration for 2700 residuals
+    # with threaded BLAS on a loaded 2-core machine; lsmr gives the same optimum 10x faster.
+    # SciPy's LinearOperator layers around the dense Jacobian cost ~45 % of a fit
+    # (benchmarks/bench_default_fit.py); a copy of SciPy's solver without them was not
+    # kept: the project writes its own code (docs/decisions.md, "The default fit's speed")
+    return least_squares(fun, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=max_nfev,
+                         ftol=1e-8, xtol=1e-8, gtol=1e-8, tr_solver="lsmr")
 
 
 def _bic(res, d: _Data, k: int) -> float:
