@@ -52,11 +52,12 @@ def _hostile_catalog(library: Path, tmp: Path) -> Path:
     lib = library.parent
     os.mkfifo(tmp / "pipe.csv")  # a FIFO with no writer: opening it for reading blocks
     cat = tmp / "catalog.csv"
-    cat.write_text("id,input\n"
-                   f"good-a,{lib / 'fabric-001.csv'}\n"
-                   f"good-b,{lib / 'fabric-002.csv'}\n"
-                   "fifo,pipe.csv\n"
-                   f"Summary.CSV,{lib / 'fabric-001.csv'}\n")
+    # kind kes, asked for: hostile input, not the fit rule, is what these tests are about
+    cat.write_text("id,input,kind\n"
+                   f"good-a,{lib / 'fabric-001.csv'},kes\n"
+                   f"good-b,{lib / 'fabric-002.csv'},kes\n"
+                   "fifo,pipe.csv,kes\n"
+                   f"Summary.CSV,{lib / 'fabric-001.csv'},kes\n")
     return cat
 
 
