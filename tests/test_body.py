@@ -97,6 +97,7 @@ def test_bounded_prior_body_on_dense_black_satin_is_what_the_data_support(satin_
     assert np.all(kd <= BODY_FACTOR * ref_body) and np.all(kd >= ref_body / BODY_FACTOR), (kd, ref_body)
 
 
+@pytest.mark.slow  # a 900-row fibre-coord fit (~14 s): make test-long, which CI runs
 def test_coord_body_and_round_trip_on_dense_black_satin(satin_dense, satin_prior):
     ref, m, ref_body = satin_dense
     coord = fit_coord(m, base=satin_prior)
