@@ -72,3 +72,19 @@ def test_lobe_sampling_reduces_variance(render_module, model_files):
     # a narrow lobe (alpha_x = 0.06) under cosine sampling has a heavy-tailed weight;
     # importance sampling must cut the variance at least by 4 (RMSE by 2, the issue's goal)
     assert variances["lobe"] * 4 < variances["cosine"], variances
+
+
+def test_alias_table_cache_returns_the_same_table_and_owns_its_copy(render_module):
+    """alias_table keeps recent tables by content (every scene of a model rebuilds its
+    sampler): a repeat gives the same table, and a caller's edit does not reach the cache."""
+    from kesbrdf.render.sampling import alias_table
+
+    w = np.random.default_rng(3).random(500)
+    p1, a1 = alias_table(w)
+    p1[:] = -1.0
+    a1[:] = 0
+    p2, a2 = alias_table(w.copy())
+    assert np.all(p2 >= 0) and np.all(p2 <= 1)
+    # the table still reproduces the weights: P(k) = (p_k + Σ_{i: alias_i = k} (1 - p_i)) / n
+    got = (p2 + np.bincount(a2, weights=1.0 - p2, minlength=w.size)) / w.size
+    np.testing.assert_allclose(got, w / w.sum(), rtol=1e-5, atol=1e-7)

@@ -118,6 +118,11 @@ class _EarlyCluster:
         self.error = None
 
         def start():
+            # Linux keeps a nice value per thread, and a new thread or process inherits its
+            # creator's: niced here, before the cluster starts its event loop thread and
+            # that thread spawns the workers, the whole cluster yields to the foreground
+            # steps (client.run(_lower_priority) reached one thread of each worker only)
+            _lower_priority()
             try:
                 from kesbrdf.batch.engine import start_local_cluster
 
@@ -268,12 +273,7 @@ class _EarlyBatch:
 
             client = None
             try:
-                client = cluster.client()
-                if client is not None:
-                    try:  # the workers too yield to the foreground steps
-                        client.run(_lower_priority)
-                    except Exception:  # noqa: BLE001 - only a priority; the batch runs regardless
-                        pass
+                client = cluster.client()  # its workers run niced (_EarlyCluster)
                 self.result = run_demo_batch(out / "batch", quick=quick, progress=self.lines.append,
                                              scheduler=client)
             except BaseException as exc:  # noqa: BLE001 - re-raised at the batch step
@@ -397,14 +397,13 @@ def run(args) -> int:
         # the looks wait on Blender and Chromium most of their wall time: they run in a
         # background process while this one renders, and the report collects them
         early_looks = _attempt("export looks", lambda: _start_looks(out, model_path, exported, say), notes)
-    # collected after the exports and looks: the background comparison fits its own default
-    # models (a dense fibre-coord fit is ~30 CPU s), and waiting for it earlier left this
-    # process idle (50 s at the plan step, measured)
-    comparisons = [] if args.quick else _attempt("reference-vs-model renders",
-                                                 lambda: _comparisons(out, reference, say, early_compare), notes, [])
-
     if not args.quick:
         _attempt("renders", lambda: _renders(out, model_path, say, drapes), notes)
+    # collected after the renders, for the report: the background comparison fits its own
+    # default model, and waiting for it earlier left this process idle (25 s after the
+    # exports, measured 2026-12-03)
+    comparisons = [] if args.quick else _attempt("reference-vs-model renders",
+                                                 lambda: _comparisons(out, reference, say, early_compare), notes, [])
     if early_looks is not None:
         looks = _attempt("export looks", lambda: _collect_looks(early_looks, say), notes)
 
@@ -575,20 +574,25 @@ def _comparisons(out: Path, reference, say, early: _Spawned | None = None) -> li
 
 
 def _renders(out: Path, model_path: Path, say, drapes: _Spawned | None = None) -> None:
-    if drapes is not None:
-        say("drape: waiting for the sheet and the skirt, simulated in a background process since the demo started")
-        try:
-            stderr(f"    background drapes: {drapes.result():.1f} s of CPU")
-        except Exception as exc:  # resumed in-process below
-            stderr(f"    background drapes: failed ({type(exc).__name__}: {exc}), resumed here")
     if not (_have("mitsuba") and _have("kesbrdf.render.scenes")):
         say("renders skipped (install kesbrdf[render])")
         return
     from kesbrdf.render import demo as render_demo
 
-    drape_dir = garment_dir = None
-    if _have("newton") and _have("kesbrdf.cloth.drape"):
+    def simulated():
+        """The two drapes' folders, once the background simulation is done; called by the
+        render step after the chart and the sphere, which need no drape."""
+        if drapes is not None:
+            say("drape: waiting for the sheet and the skirt, simulated in a background process since the demo started")
+            try:
+                stderr(f"    background drapes: {drapes.result():.1f} s of CPU")
+            except Exception as exc:  # resumed in-process below
+                stderr(f"    background drapes: failed ({type(exc).__name__}: {exc}), resumed here")
+        if not (_have("newton") and _have("kesbrdf.cloth.drape")):
+            say("drape skipped (install kesbrdf[cloth])")
+            return None, None
         from kesbrdf.cloth.drape import simulate_drape
+        from kesbrdf.render.showcase import PREVIEW
 
         def frames(label):
             def report(done, total):
@@ -598,12 +602,10 @@ def _renders(out: Path, model_path: Path, say, drapes: _Spawned | None = None) -
 
         say("drape: satin sheet onto a sphere (newton XPBD, 48x48)")
         drape_dir = simulate_drape("sphere", out / "drape", frames=SHEET_FRAMES, progress=frames("sheet"))
-        from kesbrdf.render.showcase import PREVIEW
-
         say("drape: six-gore skirt (bias-cut front) sewn from pattern panels on the mannequin turning 180° (newton XPBD)")
         garment_dir = simulate_drape("garment", out / "garment", frames=PREVIEW.sim_frames, overwrite=True,
                                      progress=frames("skirt"), **PREVIEW.drape_kwargs())
-    else:
-        say("drape skipped (install kesbrdf[cloth])")
+        return drape_dir, garment_dir
+
     say("render: sphere, draped garment, animation, colourways (Mitsuba 3)")
-    render_demo.run_demo(model_path, out / "renders", drape_dir=drape_dir, garment_dir=garment_dir, progress=say)
+    render_demo.run_demo(model_path, out / "renders", progress=say, drapes=simulated)

@@ -57,7 +57,8 @@ def _studio(spp: int, resolution=(1280, 720), **kw):
 
 
 def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=None,
-             still_spp: int = STILL_SPP, clip_spp: int = CLIP_SPP, clip_first_frame: int = CLIP_FIRST_FRAME) -> dict:
+             still_spp: int = STILL_SPP, clip_spp: int = CLIP_SPP, clip_first_frame: int = CLIP_FIRST_FRAME,
+             drapes=None) -> dict:
     """Write the demo's renders into ``out_dir``; returns {name: path}.
 
     ``drape_dir`` is a ``kesbrdf drape`` folder (the sheet on the sphere); without one a
@@ -68,6 +69,9 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
     ``garment_dir`` must hold the drape of :data:`kesbrdf.render.showcase.PREVIEW`).  Without it the
     older primitive dress form and a procedural skirt stand in, and the sphere drape is
     animated instead.  ``progress`` is called with one line of text per step.
+    ``drapes``: a callable returning ``(drape_dir, garment_dir)``, called after the chart
+    and the sphere (which need no drape), so that drapes simulated elsewhere can finish
+    meanwhile; it replaces the two arguments.
     """
     say = progress or (lambda text: None)
     out = Path(out_dir)
@@ -85,6 +89,8 @@ def run_demo(model_path, out_dir, drape_dir=None, progress=None, garment_dir=Non
     written["chart"], _ = _chart.render_chart(model_path, out / "chart.png", _studio(CHART_SPP))
     say("render: sphere (1280x720, studio)")
     written["sphere"] = _scenes.render_still(model_path, "sphere", out / "sphere.png", metered("sphere"))
+    if drapes is not None:
+        drape_dir, garment_dir = drapes()
     if drape_dir is None:
         say("render: no cloth simulation given; using a procedural drape sequence")
         drape_dir = _mesh.procedural_drape(out / "procedural_drape", frames=24)

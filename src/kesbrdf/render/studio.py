@@ -32,6 +32,7 @@ image of the scene shares it (docs/rendering.md, "Studio").
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -92,8 +93,15 @@ def environment_map(width: int = 512) -> np.ndarray:
     """The procedural studio HDR (H = width / 2, W, 3), float32, y up, row 0 at the zenith.
 
     Same lat-long convention as :func:`kesbrdf.render.scenes.environment_bitmap`
-    (Mitsuba's ``envmap``: u = atan2(x, −z) / 2π, v = θ / π).
+    (Mitsuba's ``envmap``: u = atan2(x, −z) / 2π, v = θ / π).  Made once per width (~0.45 s
+    of NumPy; every studio scene loads it: each still, colourway tile and batch preview),
+    and returned as a copy the caller may change.
     """
+    return _environment_map(int(width)).copy()
+
+
+@functools.lru_cache(maxsize=2)
+def _environment_map(width: int) -> np.ndarray:
     h = width // 2
     theta = (np.arange(h) + 0.5) / h * math.pi
     phi = (np.arange(width) + 0.5) / width * 2 * math.pi
