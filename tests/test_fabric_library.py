@@ -129,6 +129,23 @@ def test_cache_skips_finished_shards_and_rebuilds_a_damaged_one(built, tmp_path)
     assert sorted(p.name for p in copy.glob("shard-*.npz")) == [s["file"] for s in other["shards"]]
 
 
+def test_a_shard_measured_on_other_directions_is_not_reused(built, tmp_path, monkeypatch):
+    """The shard's key holds the geometry's digest: after a change of the protocols'
+    directions, every shard is measured again (it was reused, with the old values)."""
+    import shutil
+
+    from kesbrdf.batch.fabric_library import build_fabric_library
+
+    out, man = built
+    copy = tmp_path / "lib"
+    shutil.copytree(out, copy)
+    assert all(L.shard_valid(copy, 5, tuple(man["families"]), s["start"], s["stop"]) for s in man["shards"])
+    monkeypatch.setattr(L, "geometry_sha256", lambda: "0" * 64)  # as after a change of the directions
+    assert not any(L.shard_valid(copy, 5, tuple(man["families"]), s["start"], s["stop"]) for s in man["shards"])
+    again = build_fabric_library(copy, 10, seed=5, shard_size=4, workers=0)
+    assert again["run"]["shards_built"] == 3 and again["run"]["shards_cached"] == 0
+
+
 def test_family_library_from_draws_a_stratified_subsample(built):
     out, _ = built
     lib = family_library_from(out, per_family=1, seed=0, families=("ward", "ggx"))

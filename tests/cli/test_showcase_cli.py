@@ -25,8 +25,12 @@ def test_progress_in_a_log_is_a_line_every_ten_frames_with_an_eta(monkeypatch, c
     lines, each tenth frame and the last, with an ETA from the mean time a frame."""
     from kesbrdf.cli import showcase
 
+    from types import SimpleNamespace
+
     clock = iter(float(t) for t in range(0, 1000, 2))  # 2 s a frame
-    monkeypatch.setattr(showcase.time, "perf_counter", lambda: next(clock))
+    # the module's own clock only (patching time.perf_counter itself would let any other
+    # caller in the process use up ticks)
+    monkeypatch.setattr(showcase, "time", SimpleNamespace(perf_counter=lambda: next(clock)))
     log = showcase._ProgressLog()
     for done in range(0, 25):
         log("render", done, 24)

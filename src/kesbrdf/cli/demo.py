@@ -243,11 +243,13 @@ class _Spawned:
 
         self.pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
         self.future = self.pool.submit(fn, *args)
+        self.collected = False
 
     def result(self):
         try:
             return self.future.result()
         finally:
+            self.collected = True
             self.pool.shutdown()
 
 
@@ -608,4 +610,13 @@ def _renders(out: Path, model_path: Path, say, drapes: _Spawned | None = None) -
         return drape_dir, garment_dir
 
     say("render: sphere, draped garment, animation, colourways (Mitsuba 3)")
-    render_demo.run_demo(model_path, out / "renders", progress=say, drapes=simulated)
+    try:
+        render_demo.run_demo(model_path, out / "renders", progress=say, drapes=simulated)
+    finally:
+        # a render that failed before it asked for the drapes: the background process is
+        # still collected here, so its CPU is counted and nothing is left running
+        if drapes is not None and not drapes.collected:
+            try:
+                drapes.result()
+            except Exception:  # noqa: BLE001 - the render's own failure is the one reported
+                pass

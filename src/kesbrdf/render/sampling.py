@@ -47,6 +47,7 @@ from __future__ import annotations
 
 import hashlib
 import math
+import threading
 
 import numpy as np
 
@@ -118,19 +119,22 @@ def alias_table(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     # builds its sampler again (each colourway tile, each still), so the tables of the last
     # few weight vectors are kept, by content
     key = hashlib.blake2b(w.tobytes(), digest_size=16).digest()
-    if key in _ALIAS_CACHE:
-        prob, alias = _ALIAS_CACHE[key]
-        return prob.copy(), alias.copy()
+    with _ALIAS_LOCK:  # scenes may be built on several threads
+        got = _ALIAS_CACHE.get(key)
+    if got is not None:
+        return got[0].copy(), got[1].copy()
     prob, alias = _vose(w, n, total)
-    if len(_ALIAS_CACHE) >= _ALIAS_CACHE_SIZE:
-        _ALIAS_CACHE.pop(next(iter(_ALIAS_CACHE)))
-    _ALIAS_CACHE[key] = (prob.copy(), alias.copy())
+    with _ALIAS_LOCK:
+        while len(_ALIAS_CACHE) >= _ALIAS_CACHE_SIZE:
+            _ALIAS_CACHE.pop(next(iter(_ALIAS_CACHE)))
+        _ALIAS_CACHE[key] = (prob.copy(), alias.copy())
     return prob, alias
 
 
 #: Alias tables by the blake2b digest of their weights (:func:`alias_table`).
 _ALIAS_CACHE: dict = {}
 _ALIAS_CACHE_SIZE = 16
+_ALIAS_LOCK = threading.Lock()
 
 
 def _vose(w: np.ndarray, n: int, total: float) -> tuple[np.ndarray, np.ndarray]:

@@ -44,6 +44,7 @@ index order, so it is the same whatever the shard size.  Building on Dask:
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -295,8 +296,21 @@ def shard_name(start: int, stop: int) -> str:
 
 
 def _shard_key(seed, families, start, stop) -> dict:
+    # the directions the shard was measured on are part of it: a shard built on another
+    # geometry (the code's protocols changed) is not reused
     return {"format": FORMAT, "version": VERSION, "seed": int(seed), "families": list(families),
-            "start": int(start), "stop": int(stop), "noise": NOISE}
+            "start": int(start), "stop": int(stop), "noise": NOISE, "geometry": geometry_sha256()}
+
+
+@functools.lru_cache(maxsize=1)
+def geometry_sha256() -> str:
+    """sha256 of :func:`geometry` (every array's name, shape and float64 bytes, sorted by name)."""
+    h = hashlib.sha256()
+    for name, a in sorted(geometry().items()):
+        a = np.ascontiguousarray(a, dtype=np.float64)
+        h.update(f"{name}:{a.shape}\n".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def _sha256_file(path: Path) -> str:
