@@ -18,9 +18,9 @@ DEMO_EXPORT_FORMATS = ("brdf-explorer",)
 #: fit``'s rule (an empty column, what ``kesbrdf batch`` does on a user's catalogue)
 #: compares each fabric with the woven-cloth prior by leave-one-orientation-out refits,
 #: ~8 s of CPU a fabric, 80 s for the ten: 40 % of the demo's CPU budget for a step
-#: that shows orchestration at library scale.  The summary and contact sheet say which
-#: kind each fabric got and that it was asked for (docs/decisions.md, "A batch fits by
-#: kesbrdf fit's rule").
+#: that shows orchestration at library scale.  The summary's ``kind`` column shows the
+#: kind and each ``fit_report.json`` says it was asked for (docs/decisions.md, "A batch
+#: fits by kesbrdf fit's rule").
 DEMO_KIND = "kes"
 
 
