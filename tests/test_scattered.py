@@ -212,6 +212,7 @@ def test_too_few_samples_raise(curet):
 REAL_DATA_MARGIN = 0.01
 
 
+@pytest.mark.slow  # five-fold refits on real data (~7 s each): make test-long, which CI runs
 @pytest.mark.parametrize("prefix", ["band_s42_corduroy", "band_s07_velvet"])
 def test_real_fabric_held_out_error_regression(curet, prefix):
     m = _channel(curet, prefix)
