@@ -145,11 +145,11 @@ def run(draws: int = 3, names=None, cache_path: Path = CACHE, library=None, per_
     out["fixed_kind_lofo"] = {f: {"value": v["value"]} for f, v in choose_lofo(results, fixed, grid).items()}
     if "default" in fit_map:
         # the dense rule's branch choice needs the default's, kes-line's and rows' dense rows
-    needed = {"default", "kes-line", "rows"}
-    if all(needed <= set(rows["dense"]) for fabs in results.values() for rows in fabs.values()):
-        out["dense_kes_branch_lofo"] = dense_branch_lofo(results)
-    else:
-        out["dense_kes_branch_lofo"] = {"skipped": f"needs the fitters {', '.join(sorted(needed))}"}
+        needed = {"default", "kes-line", "rows"}
+        if all(needed <= set(rows["dense"]) for fabs in results.values() for rows in fabs.values()):
+            out["dense_kes_branch_lofo"] = dense_branch_lofo(results)
+        else:
+            out["dense_kes_branch_lofo"] = {"skipped": f"needs the fitters {', '.join(sorted(needed))}"}
     if library is not None:
         out["library"] = {"path": str(library), "sha256": built.sha256, "n": built.n, "per_family": per_family,
                           "seed": seed, "fabrics": {f: list(v) for f, v in lib.items()}}
