@@ -75,6 +75,7 @@ def test_compare_models_ranks_a_worse_model_below(satin):
     assert all("does not beat linear" in line for line in verdicts(res))
 
 
+@pytest.mark.slow  # an auto fit, a prior fit and a full report (~9 s): make test-long, which CI runs
 def test_report_has_comparison_table_uncertainty_and_planning(satin):
     import kesbrdf
     from kesbrdf.plotting.report import ReportInputs, build_report

@@ -251,6 +251,7 @@ def toy_kind():
         d.update(old)
 
 
+@pytest.mark.slow  # every command again on a toy kind (~10 s): make test-long, which CI runs
 def test_a_new_kind_is_covered_without_other_edits(toy_kind, tmp_path, capsys, monkeypatch):
     assert toy_kind in base.known_kinds()
     model_path, meas_path = fit_kind(toy_kind, tmp_path)

@@ -265,6 +265,7 @@ THREEJS_DIRECTION_FLIP_BOUND = 0.259
 
 
 @needs_threejs
+@pytest.mark.slow  # headless Chromium renders (~14 s): make test-long, which CI runs
 def test_gltf_in_threejs_matches_the_plugin_and_a_turned_anisotropy_does_not(setup, fits):
     """Issue 18: three.js (GLTFLoader's MeshPhysicalMaterial, headless Chromium) renders the
     glTF close to the plugin render, on the fabric and where the anisotropy direction
