@@ -259,3 +259,23 @@ def test_compare_render_fits_by_kesbrdf_fits_rule_unless_a_kind_is_given(monkeyp
     assert main(["compare-render", "--reference", "satin-ward", "-o", out]) == 0
     assert main(["compare-render", "--reference", "satin-ward", "--kind", "fibre-coord", "--with-prior", "-o", out]) == 0
     assert calls == [("default",), ("fibre-coord", "fibre-prior")]
+
+
+def test_a_given_model_is_rendered_as_it_is(render_module, tmp_path, monkeypatch):
+    """``given``: the demo's own model is rendered against the reference, not refitted
+    (the demo's panel shows the model its renders use)."""
+    import kesbrdf
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.references.ward import AnisotropicWard
+    from kesbrdf.render import compare
+
+    model = kesbrdf.fit(measure(AnisotropicWard(0.08, 0.22)), kind="kes")[0]
+
+    def no_fit(*a, **k):
+        raise AssertionError("a given model was fitted again")
+
+    monkeypatch.setattr(compare, "fit_reference_model", no_fit)
+    opts = compare.default_options(spp=4, resolution=(32, 24))
+    r = compare.compare_render("satin-ward", "paper", "sphere", opts, noise_floor=False, given={"default": model})
+    assert r["models"]["default"] == {**r["models"]["default"], "kind": "kes", "fitted": "given"}
+    assert 0.0 <= r["flip"] < 1.0

@@ -265,7 +265,8 @@ def _reference_renders(reference: str, scene: str, opts, o2, params, noise_floor
 
 
 def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere", opts=None,
-                   output=None, params=None, noise_floor: bool = True, models=("default",)) -> dict:
+                   output=None, params=None, noise_floor: bool = True, models=("default",),
+                   given: dict | None = None) -> dict:
     """Render ``scene`` with the reference and with its fitted model(s); compare.
 
     Parameters
@@ -286,6 +287,10 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     models : sequence of :func:`model_names`
         Models fitted to the one measurement and rendered (default: ``kesbrdf fit``'s
         rule alone).
+    given : dict, optional
+        {name: model} already fitted to a measurement of ``reference`` with ``protocol``
+        (``kesbrdf demo`` passes the model it fitted from its camera frames): rendered as
+        they are instead of being fitted again.
 
     Returns
     -------
@@ -308,7 +313,8 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
     opts = (opts or default_options()).validate()
     ref = make_reference(reference, params)
     m = measure(ref, protocol=protocol)
-    fitted = {mo: fit_reference_model(ref, protocol, mo, m)[0] for mo in models}
+    given = dict(given or {})
+    fitted = {mo: given[mo] if mo in given else fit_reference_model(ref, protocol, mo, m)[0] for mo in models}
     n_samples = len(m)
     # the models and the second reference use the same other seed: the comparisons
     # then differ only in the cloth's BSDF, not in the noise
@@ -332,7 +338,8 @@ def compare_render(reference: str, protocol: str = "paper", scene: str = "sphere
         "samples": n_samples,
         "flip": first["flip"],
         "rel_rmse": first["rel_rmse"],
-        "models": {mo: {"kind": fitted[mo].kind, "flip": r["flip"], "rel_rmse": r["rel_rmse"]}
+        "models": {mo: {"kind": fitted[mo].kind, "flip": r["flip"], "rel_rmse": r["rel_rmse"],
+                        "fitted": "given" if mo in given else "from a virtual measurement of the reference"}
                    for mo, r in results.items()},
         "exposure": exposure,
         "cloth_pixels": int(mask.sum()),
