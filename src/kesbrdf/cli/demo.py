@@ -190,8 +190,8 @@ def _compare_name(reference) -> str:
 
 
 #: Protocols of the demo's reference-vs-model panel: the paper's, the protocol of the
-#: embedded sample.  The dense panel (``kesbrdf compare-render sadeghi-black-satin
-#: --protocol dense``, and benchmarks/bench_compare.py) cost the demo ~47 s of CPU, 31 s
+#: embedded sample.  The dense panel (``kesbrdf compare-render --reference
+#: sadeghi-black-satin --protocol dense -o dense.png``, and benchmarks/bench_compare.py) cost the demo ~47 s of CPU, 31 s
 #: of it the 900-row default fit: a sixth of the demo's CPU for one image (issue 17's
 #: budget, docs/decisions.md, "The demo's compare panel").
 DEMO_COMPARE_PROTOCOLS = ("paper",)
