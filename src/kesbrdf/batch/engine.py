@@ -28,6 +28,7 @@ seconds (:mod:`kesbrdf.batch.isolation`): a hung step fails its fabric, never th
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import importlib.util
@@ -285,14 +286,20 @@ def run_batch(catalog, out, steps=DEFAULT_STEPS, workers: int | None = None, sch
     return result
 
 
-def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render, settings, workers, scheduler,
-              retries, dashboard, env_extra, progress, finish, notes, chunk, task_timeout):
-    from distributed import Client, KilledWorker, as_completed
+@contextlib.contextmanager
+def _engine_client(scheduler, workers: int, **cluster_kwargs):
+    """``(client, scheduler_info)`` of the engine's cluster, the worker plugin registered.
+
+    No ``scheduler`` starts :func:`start_local_cluster` (``workers``, ``cluster_kwargs``);
+    an address is connected to; a ``distributed.Client`` is used and left open.  What
+    was started or connected here is closed on exit.
+    """
+    from distributed import Client
 
     cluster = None
     own_client = True
     if scheduler is None:
-        cluster = start_local_cluster(workers, dashboard=dashboard, env=env_extra)
+        cluster = start_local_cluster(workers, **cluster_kwargs)
         client = Client(cluster)
     elif isinstance(scheduler, str):
         client = Client(scheduler)
@@ -301,11 +308,25 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
     try:
         info = client.scheduler_info()
         n_workers = len(info.get("workers", {}))
-        render_ok = any((w.get("resources") or {}).get("render") for w in info.get("workers", {}).values())
         try:
             client.register_plugin(_worker_plugin(worker_env(max(1, n_workers))))
         except AttributeError:  # pragma: no cover - older distributed
             client.register_worker_plugin(_worker_plugin(worker_env(max(1, n_workers))))
+        yield client, info
+    finally:
+        if own_client:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_render, settings, workers, scheduler,
+              retries, dashboard, env_extra, progress, finish, notes, chunk, task_timeout):
+    from distributed import KilledWorker, as_completed
+
+    with _engine_client(scheduler, workers, dashboard=dashboard, env=env_extra) as (client, info):
+        n_workers = len(info.get("workers", {}))
+        render_ok = any((w.get("resources") or {}).get("render") for w in info.get("workers", {}).values())
         dash_link = client.dashboard_link if dashboard else None
         if want_render and not render_ok:
             notes.append("preview skipped: no worker has the 'render' resource (Mitsuba + libLLVM)")
@@ -373,11 +394,6 @@ def _run_dask(fabrics, store, storage_options, core_steps, all_steps, want_rende
             for fab in again:
                 submit([fab], kind)
         return n_workers, dash_link
-    finally:
-        if own_client:
-            client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 def run_tasks(fn, tasks: list, workers: int | None = None, scheduler=None, retries: int = 2, progress=None,
@@ -411,23 +427,10 @@ def run_tasks(fn, tasks: list, workers: int | None = None, scheduler=None, retri
             if progress:
                 progress({"event": "task", "index": k, "result": results[k], "done": k + 1, "total": len(tasks)})
         return results
-    from distributed import Client, as_completed
+    from distributed import as_completed
 
-    cluster = None
-    own_client = True
-    if scheduler is None:
-        cluster = start_local_cluster(workers, render=False)
-        client = Client(cluster)
-    elif isinstance(scheduler, str):
-        client = Client(scheduler)
-    else:
-        client, own_client = scheduler, False
-    try:
-        n_workers = len(client.scheduler_info().get("workers", {}))
-        try:
-            client.register_plugin(_worker_plugin(worker_env(max(1, n_workers))))
-        except AttributeError:  # pragma: no cover - older distributed
-            client.register_worker_plugin(_worker_plugin(worker_env(max(1, n_workers))))
+    with _engine_client(scheduler, workers, render=False) as (client, info):
+        n_workers = len(info.get("workers", {}))
         if progress:
             progress({"event": "start", "total": len(tasks), "workers": n_workers})
         token = uuid.uuid4().hex[:8]
@@ -459,8 +462,3 @@ def run_tasks(fn, tasks: list, workers: int | None = None, scheduler=None, retri
             if progress:
                 progress({"event": "task", "index": k, "result": results[k], "done": done, "total": len(tasks)})
         return results
-    finally:
-        if own_client:
-            client.close()
-        if cluster is not None:
-            cluster.close()
