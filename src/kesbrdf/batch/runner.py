@@ -25,7 +25,6 @@ Errors:
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -40,7 +39,7 @@ from kesbrdf.batch.catalog import DEFAULT_OPTIONS, Fabric
 from kesbrdf.batch.steps import DEPENDS, STEP_FUNCTIONS, closure, input_files, step_params
 from kesbrdf.batch.store import Store, is_url
 from kesbrdf.errors import KesbrdfError
-from kesbrdf.io.files import open_regular
+from kesbrdf.io.files import sha256_file
 
 __all__ = ["run_fabric", "run_chunk", "fabric_options", "PERMANENT_ERRORS", "TEST_HOOKS_ENV", "DEFAULT_TASK_TIMEOUT"]
 
@@ -54,15 +53,6 @@ TEST_HOOKS_ENV = "KESBRDF_BATCH_TEST_HOOKS"
 #: machine (docs/batch.md "Performance"); 10 minutes is 20 times that, and bounds the
 #: time a hung step holds a worker.
 DEFAULT_TASK_TIMEOUT = 600.0
-
-
-def _sha256_file(path: Path) -> str:
-    """sha256 of a regular file (a FIFO, device or folder is refused, never opened)."""
-    h = hashlib.sha256()
-    with open_regular(path) as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def _one_line(exc: BaseException) -> str:
@@ -187,7 +177,7 @@ def _ingest_inputs(path: Path) -> tuple[list[Path], dict]:
     files = input_files(path)
     base = files[0].parent
     return files, {"input/" + p.relative_to(base).as_posix() if p.is_relative_to(base) else str(p):
-                   _sha256_file(p) for p in files}
+                   sha256_file(p) for p in files}
 
 
 def _call_step(step: str, fabric_id: str, inputs: dict, params: dict, scratch: Path) -> dict:
@@ -251,7 +241,7 @@ def _run_steps(fabric, store, steps, settings, options, vers, src, cache, record
                 result = isolation.run(_call_step, (step, fabric.id, local_inputs, params, scratch), task_timeout,
                                        env, what=what)
                 seconds = time.perf_counter() - t1
-                outputs = {p.relative_to(scratch).as_posix(): _sha256_file(p)
+                outputs = {p.relative_to(scratch).as_posix(): sha256_file(p)
                            for p in sorted(scratch.rglob("*")) if p.is_file()}
                 doc = mf.make_manifest(fabric.id, step, inputs, params, vers, outputs, result, seconds,
                                        pid=os.getpid(), finished_unix=time.time())

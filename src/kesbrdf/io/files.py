@@ -17,13 +17,14 @@ A missing or unreadable file still raises the usual :class:`OSError`
 
 from __future__ import annotations
 
+import hashlib
 import os
 import stat
 from typing import BinaryIO
 
 from kesbrdf.errors import FormatError, where
 
-__all__ = ["open_regular", "read_regular", "file_kind"]
+__all__ = ["open_regular", "read_regular", "file_kind", "sha256_file"]
 
 _KINDS = ((stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a named pipe (FIFO)"),
           (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"))
@@ -72,3 +73,13 @@ def read_regular(path: str | os.PathLike) -> bytes:
     """The bytes of a regular file (:func:`open_regular`; drop-in for ``Path.read_bytes``)."""
     with open_regular(path) as fh:
         return fh.read()
+
+
+def sha256_file(path: str | os.PathLike) -> str:
+    """SHA-256 of a regular file's bytes (hex), read in 1 MiB blocks; a FIFO, device or
+    folder is refused (:func:`open_regular`), never opened."""
+    digest = hashlib.sha256()
+    with open_regular(path) as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()

@@ -55,6 +55,7 @@ import numpy as np
 
 from kesbrdf._atomic import write_bytes, write_text
 from kesbrdf.errors import KesbrdfError
+from kesbrdf.io.files import sha256_file
 from kesbrdf.geometry import in_plane_directions, spherical_to_cartesian
 from kesbrdf.measure.gonio import measure, protocol_geometry
 from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions
@@ -313,14 +314,6 @@ def geometry_sha256() -> str:
     return h.hexdigest()
 
 
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
 def build_shard(folder, seed: int, families, start: int, stop: int) -> dict:
     """Compute fabrics ``start ≤ k < stop`` and write ``<shard>.npz`` then ``<shard>.json``
     (atomically, the JSON last: it is the shard's commit).  Returns the JSON document."""
@@ -342,7 +335,7 @@ def build_shard(folder, seed: int, families, start: int, stop: int) -> dict:
     buf = io.BytesIO()
     np.savez_compressed(buf, **arrays)
     npz = write_bytes(folder / f"{name}.npz", buf.getvalue())
-    doc = {"key": _shard_key(seed, families, start, stop), "file": npz.name, "sha256": _sha256_file(npz),
+    doc = {"key": _shard_key(seed, families, start, stop), "file": npz.name, "sha256": sha256_file(npz),
            "fabrics": [{**s, "digest": d} for s, d in zip(specs, digests)],
            "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
     write_text(folder / f"{name}.json", json.dumps(doc, indent=1) + "\n")
@@ -364,7 +357,7 @@ def shard_valid(folder, seed: int, families, start: int, stop: int) -> dict | No
     if not doc or doc.get("key") != _shard_key(seed, tuple(families), start, stop):
         return None
     npz = Path(folder) / doc.get("file", "")
-    if not npz.is_file() or _sha256_file(npz) != doc.get("sha256"):
+    if not npz.is_file() or sha256_file(npz) != doc.get("sha256"):
         return None
     return doc
 

@@ -17,7 +17,6 @@ transfer function on ``code / max_code``.  OpenEXR frames are linear floats.
 
 from __future__ import annotations
 
-import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +26,7 @@ import numpy as np
 from kesbrdf._atomic import atomic_path
 from kesbrdf.measure.acquisition.sensor import RESPONSES, srgb_decode
 from kesbrdf.errors import FormatError, validate_choice, where
-from kesbrdf.io.files import open_regular
+from kesbrdf.io.files import open_regular, sha256_file  # noqa: F401  (sha256_file re-exported)
 
 __all__ = [
     "Frame",
@@ -79,15 +78,6 @@ class Frame:
         """``"32x32x3 uint16"``: size and bit depth, as messages show them."""
         h, w, c = self.pixels.shape
         return f"{w}x{h}x{c} {self.dtype}"
-
-
-def sha256_file(path) -> str:
-    """SHA-256 of a file's bytes (hex)."""
-    digest = hashlib.sha256()
-    with open_regular(path) as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            digest.update(block)
-    return digest.hexdigest()
 
 
 def _as_hwc(array: np.ndarray, path: Path) -> np.ndarray:
