@@ -282,3 +282,16 @@ def test_mutated_array_shapes_load_or_raise_model_error(kind, data):
             values = data.draw(st.sampled_from([0.0, 1.0, -1.0, np.nan, np.inf, 1e308]))
             entry["data"] = base64.b64encode(np.full(n, values, "<f8").tobytes()).decode()
     load_bytes(json.dumps(doc).encode("utf-8"))
+
+
+def test_a_key_with_a_newline_is_quoted_in_the_one_line_error():
+    """Found by the fuzz sweep: a bad number under a key holding a newline gave a
+    two-line ModelError (the key was printed raw)."""
+    from kesbrdf.io.model_file import model_from_dict
+
+    doc = copy.deepcopy(DOCS["kes"])
+    doc["format_version.\n"] = 1.0000000000000002e100
+    with pytest.raises(ModelError) as info:
+        model_from_dict(doc)
+    message = str(info.value)
+    assert "\n" not in message and '"format_version.\\n"' in message, message

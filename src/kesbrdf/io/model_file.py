@@ -108,7 +108,10 @@ def decode_array(obj, name: str = "array", source=None) -> np.ndarray:
 
 
 def _field_name(path: tuple) -> str:
-    return "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")[:120] or "document"
+    """``parameters.body``, ``support.psi_deg[2]``; a key with a newline or another
+    unprintable character is quoted as JSON (``."a\\nb"``), so the message stays one line."""
+    return "".join(f"[{p}]" if isinstance(p, int) else f".{p if str(p).isprintable() else json.dumps(p)}"
+                   for p in path).lstrip(".")[:120] or "document"
 
 
 def _check_tree(doc, source) -> None:
