@@ -43,7 +43,7 @@ def _reference(name):
     if name == "white_felt":
         from kesbrdf.references.rgl_tensor import RGLTensorBRDF
 
-        return RGLTensorBRDF(Path(__file__).resolve().parents[1] / "tests" / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf")
+        return RGLTensorBRDF(Path(__file__).resolve().parents[1] / "src" / "kesbrdf" / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf")
     return Sadeghi2013(name)
 
 

@@ -80,7 +80,7 @@ def references() -> dict:
     try:
         from kesbrdf.references.rgl import RGLMeasured
 
-        path = HERE.parent / "tests" / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
+        path = HERE.parent / "src" / "kesbrdf" / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
         fams["rgl"] = {"felt_white": RGLMeasured(path)}
     except Exception:  # noqa: BLE001  (Mitsuba missing: the family is skipped and said so)
         fams["rgl"] = {}

@@ -1,7 +1,7 @@
 """Real data: KES models of the RGL-EPFL acrylic felts against the measured felts.
 
 For each felt (all three from ``$KESBRDF_RGL_DIR`` when set, else the one
-committed in ``tests/data/rgl``):
+shipped in ``src/kesbrdf/data/rgl``):
 
 * ``<felt>_kes_<mapping>_<light>_{rmse,log_rmse,nrmse}``: the paper-protocol model
   (ψ = 0, 45, 90, 135°, θ_i + θ_r = 90°, 3° steps; ``kesbrdf.models.kes.fit``) read through
@@ -28,7 +28,7 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 SHARED = Path(os.environ["KESBRDF_RGL_DIR"]) if os.environ.get("KESBRDF_RGL_DIR") else None
-COMMITTED = HERE.parent / "tests" / "data" / "rgl"
+COMMITTED = HERE.parent / "src" / "kesbrdf" / "data" / "rgl"
 FELTS = ("white", "pink", "purple")
 HELD_OUT_DEG = (22.5, 60.0, 112.5)
 

@@ -12,9 +12,11 @@ from pathlib import Path
 
 import numpy as np
 
+from kesbrdf.references.registry import SHIPPED_RGL_DIR
+
 DATA = Path(__file__).resolve().parent / "data"
 CURET_EXTRACT = DATA / "curet_fabrics.csv"
-RGL_FELT = DATA / "rgl" / "acrylic_felt_white_rgb.bsdf"
+RGL_FELT = SHIPPED_RGL_DIR / "acrylic_felt_white_rgb.bsdf"
 
 
 def write_curet(folder, extract=None, samples=(1, 42), negative_at=None):

@@ -221,3 +221,47 @@ def test_the_checker_sees_violations(tmp_path, monkeypatch, source, expected):
         assert private == ["_fill_table"] and target == "kesbrdf.models.kes"
     else:
         assert target == expected and layer_of(target) > layer_of("kesbrdf.models.interpolation")
+
+
+#: Source-tree folders the installed package cannot see.  ``viewer/`` (the web viewer's
+#: npm project, whose ``viewer/scripts/gltf-look.mjs`` the glTF look runs) is the one
+#: allowed reach: a development tool's input, not data a model or reference needs.
+_OUTSIDE_THE_PACKAGE = ("tests", "benchmarks", "docs")
+
+
+def _reaches_outside(source: str) -> list[str]:
+    """Paths in ``source`` into a source-tree folder outside the package: a string that
+    starts ``tests/`` (etc.), or the folder's name as an operand of a ``/`` path join.
+    (A bare word elsewhere, such as a dict key ``"tests"``, is not a path.)"""
+    found = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str):
+            if node.value.replace("\\", "/").split("/", 1)[0] in _OUTSIDE_THE_PACKAGE and "/" in node.value:
+                found.append(node.value)
+        elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div):
+            found += [side.value for side in (node.left, node.right)
+                      if isinstance(side, ast.Constant) and side.value in _OUTSIDE_THE_PACKAGE]
+    return found
+
+
+def test_the_package_reads_nothing_from_the_source_tree():
+    """Issue 19: the references' registry found the white felt in ``tests/data``, which an
+    installed package does not have.  Data the package needs ships in ``kesbrdf/data``.
+    Docstrings mention test files as prose; the check looks at code only."""
+    bad = {}
+    for path in modules():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        for n in ast.walk(tree):
+            if isinstance(n, (ast.Module, ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)) and n.body \
+                    and isinstance(n.body[0], ast.Expr) and isinstance(n.body[0].value, ast.Constant):
+                n.body[0] = ast.Pass()
+        hits = _reaches_outside(ast.unparse(tree))
+        if hits:
+            bad[module_name(path)] = hits
+    assert not bad, f"modules that read the source tree outside the package: {bad}"
+
+
+def test_the_source_tree_check_can_fail():
+    assert _reaches_outside('Path(here).parents[3] / "tests" / "data" / "rgl"') == ["tests"]
+    assert _reaches_outside('open("tests/data/x.csv")') == ["tests/data/x.csv"]
+    assert _reaches_outside('row["tests"] = 1; print("the tests pass")') == []

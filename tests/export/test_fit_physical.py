@@ -20,6 +20,7 @@ from kesbrdf.export.image_space import display_value
 from kesbrdf.export.openpbr import OPENPBR
 from kesbrdf.export.preview_surface import PREVIEW_SURFACE
 from kesbrdf.export.standard_surface import STANDARD_SURFACE
+from kesbrdf.references.registry import SHIPPED_RGL_DIR
 
 #: small grids: ranges and bounds do not depend on the grid, and each fit takes < 1 s
 SMALL = ((4, 8), (6, 12))
@@ -66,7 +67,7 @@ def fabrics():
     from kesbrdf.references.registry import make_reference
     from kesbrdf.references.rgl_tensor import RGLTensorBRDF
 
-    felt = Path(__file__).resolve().parents[1] / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
+    felt = SHIPPED_RGL_DIR / "acrylic_felt_white_rgb.bsdf"
     return {
         "black_satin": _kes(make_reference("sadeghi-black-satin")),
         "cotton_twill": _kes(Irawan2012("cotton_twill")),

@@ -8,8 +8,9 @@ import pytest
 
 from kesbrdf.errors import FormatError
 from source_helpers import merl_bin_centres, pairs_from_half_diff, write_merl
+from kesbrdf.references.registry import SHIPPED_RGL_DIR
 
-FELT = Path(__file__).resolve().parents[1] / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
+FELT = SHIPPED_RGL_DIR / "acrylic_felt_white_rgb.bsdf"
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None
 
 

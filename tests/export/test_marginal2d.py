@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from kesbrdf.references.marginal2d import Marginal2D
+from kesbrdf.references.registry import SHIPPED_RGL_DIR
 
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None
-FELT = Path(__file__).resolve().parents[1] / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
+FELT = SHIPPED_RGL_DIR / "acrylic_felt_white_rgb.bsdf"
 #: float32 (Mitsuba) vs float64 (here): positions agree to this; the sample() quadratic
 #: loses ~4 digits where a segment's density is nearly constant.
 POS_TOL = {"sample": 1e-4, "invert": 2e-6}

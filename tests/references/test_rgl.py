@@ -3,7 +3,7 @@ end-to-end check tests/data/README asks for: an isotropic measured material, put
 through the paper's protocol at four orientations and fitted, must come back at every
 orientation.
 
-All numbers below were measured on ``tests/data/rgl/acrylic_felt_white_rgb.bsdf``
+All numbers below were measured on ``src/kesbrdf/data/rgl/acrylic_felt_white_rgb.bsdf``
 (Mitsuba 3.9.1, variant llvm_ad_rgb); see the comment next to each constant.
 """
 
@@ -17,8 +17,9 @@ import pytest
 from kesbrdf.errors import FormatError
 from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.references.rgl import RGLMeasured, read_tensor_file
+from kesbrdf.references.registry import SHIPPED_RGL_DIR
 
-FELT = Path(__file__).resolve().parents[1] / "data" / "rgl" / "acrylic_felt_white_rgb.bsdf"
+FELT = SHIPPED_RGL_DIR / "acrylic_felt_white_rgb.bsdf"
 
 # --- tolerances, each with where it comes from ---------------------------------------
 #: Rotating both directions about the normal: Mitsuba evaluates the isotropic data in

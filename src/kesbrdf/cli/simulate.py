@@ -12,8 +12,8 @@ def add_arguments(p):
     p.add_argument("-o", "--output", required=True, help="measurement CSV to write")
     p.add_argument("--reference", default="satin-ward",
                    help=f"reference BRDF: {', '.join(REFERENCES)}; or the path of any RGL .bsdf or MERL .binary "
-                   "file. The rgl-felt-* names look for their files in $KESBRDF_RGL_DIR, then in the source "
-                   "tree's tests/data/rgl (white felt only); see docs/formats.md")
+                   "file. The rgl-felt-* names look for their files in $KESBRDF_RGL_DIR, then in the package's "
+                   "data/rgl (white felt only); see docs/formats.md")
     p.add_argument("--params", help="JSON object of reference parameters, e.g. '{\"alpha_x\": 0.1}'")
     add_protocol_arguments(p)
     p.add_argument("--noise", type=float, default=0.0, help="relative noise (std / value)")

@@ -18,7 +18,7 @@ Names
     the embedded demo fabric (:func:`kesbrdf.references.sadeghi2013.black_satin`).
 ``rgl-felt-<colour>``
     RGL-EPFL measured felts read through Mitsuba's ``measured`` plugin; the white felt
-    ships with the tests (CC0), the others are found through ``$KESBRDF_RGL_DIR``.
+    ships with the package (CC0), the others are found through ``$KESBRDF_RGL_DIR``.
 A path
     Any RGL tensor file (``.bsdf``) or MERL ``.binary``
     (:func:`kesbrdf.io.sources.reference_from_file`, numpy readers, recognised by
@@ -34,7 +34,7 @@ from pathlib import Path
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.references.params import parse_params
 
-__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "RGL_FILES", "RGL_DIRS", "make_reference", "rgl_path",
+__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "RGL_FILES", "RGL_DIRS", "SHIPPED_RGL_DIR", "make_reference", "rgl_path",
            "is_reference_path"]
 
 _SADEGHI_PRESETS = ("linen", "silk_crepe", "satin", "satin_back", "silk_shot", "velvet")
@@ -45,13 +45,10 @@ RGL_FILES = {
     "rgl-felt-pink": "acrylic_felt_pink_rgb.bsdf",
     "rgl-felt-purple": "acrylic_felt_purple_rgb.bsdf",
 }
-#: Where RGL files are looked for: ``$KESBRDF_RGL_DIR`` when set, then the source
-#: tree's test data (white felt, CC0, shipped).
-RGL_DIRS = tuple(
-    Path(p)
-    for p in (os.environ.get("KESBRDF_RGL_DIR", ""), str(Path(__file__).resolve().parents[3] / "tests" / "data" / "rgl"))
-    if p
-)
+#: The RGL files that ship inside the package (the white felt, CC0; its README there).
+SHIPPED_RGL_DIR = Path(__file__).resolve().parents[1] / "data" / "rgl"
+#: Where RGL files are looked for: ``$KESBRDF_RGL_DIR`` when set, then the package's own.
+RGL_DIRS = tuple(Path(p) for p in (os.environ.get("KESBRDF_RGL_DIR", ""), str(SHIPPED_RGL_DIR)) if p)
 
 #: References that need no data file and no renderer (numpy only).
 ANALYTIC_REFERENCES = (

@@ -148,7 +148,7 @@ class RGLMeasured(ReferenceBRDF):
     --------
     >>> import numpy as np
     >>> from kesbrdf.references.rgl import RGLMeasured
-    >>> felt = RGLMeasured("tests/data/rgl/acrylic_felt_white_rgb.bsdf")  # doctest: +SKIP
+    >>> felt = RGLMeasured("src/kesbrdf/data/rgl/acrylic_felt_white_rgb.bsdf")  # doctest: +SKIP
     >>> felt([[0, 0, 1.0]], [[0, 0, 1.0]]).shape  # doctest: +SKIP
     (1, 3)
     """
