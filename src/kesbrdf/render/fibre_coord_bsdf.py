@@ -37,6 +37,7 @@ import numpy as np
 import drjit as dr
 import mitsuba as mi
 
+from kesbrdf.render.jit import opaque_rgb
 from kesbrdf.render.prior_bsdf import FibrePriorBSDF, PriorDrJit, family_frame, as_rgb
 
 __all__ = ["FibreCoordBSDF", "register", "PLUGIN"]
@@ -81,9 +82,10 @@ class _CoordPrior:
         sl, theta = prior.slices(), prior.theta
         #: the corrected k_d e^{δ_0} (RGB): the body of the recolouring
         self.kd = self.base.kd * as_rgb(np.exp(theta[sl["kd"]]))
+        self.kd_c = opaque_rgb(self.kd)
         self.families = []
         for fam, alpha in FAMILIES:
-            self.families.append({"alpha": alpha, "scale": as_rgb(np.exp(theta[sl[f"{fam}_ks"]])),
+            self.families.append({"alpha": alpha, "scale": opaque_rgb(as_rgb(np.exp(theta[sl[f"{fam}_ks"]]))),
                                   "p": _PiecewiseLinear(U_NODES_DEG, theta[sl[f"{fam}_p"]]),
                                   "n": _PiecewiseLinear(PHI_NODES_DEG, theta[sl[f"{fam}_n"]])})
         self.d = _PiecewiseLinear(TD_NODES_DEG, theta[sl["d"]]) if prior.free_theta_d else None
@@ -92,7 +94,7 @@ class _CoordPrior:
         """f_prior of (C1) (Color3f) for unit directions above the horizon."""
         h = dr.normalize(wi + wr)
         log_d = self.d(_angle(wi, h)) if self.d is not None else 0.0
-        f = mi.Color3f(*[float(k) for k in self.kd])
+        f = mi.Color3f(self.kd_c)
         for fam, part in zip(self.families, self.base.parts(wi, wr)):
             hx, hy, hz = family_frame(h, fam["alpha"])
             i, r = family_frame(wi, fam["alpha"]), family_frame(wr, fam["alpha"])
@@ -103,7 +105,7 @@ class _CoordPrior:
             log_c = dr.clip(fam["p"](u) + fam["n"](phi), -_LOG_CLIP, _LOG_CLIP)
             if self.d is not None:
                 log_c = log_c + dr.clip(log_d, -_LOG_CLIP, _LOG_CLIP)
-            f = f + mi.Color3f(*[float(s) for s in fam["scale"]]) * (dr.maximum(part, 0.0) * dr.exp(log_c))
+            f = f + fam["scale"] * (dr.maximum(part, 0.0) * dr.exp(log_c))
         return f
 
 

@@ -58,7 +58,7 @@ from kesbrdf.errors import ModelError, where
 from kesbrdf.optics import fresnel_dielectric
 from kesbrdf.render.bsdf import EXTRAPOLATIONS, SAMPLINGS, FabricBSDF, KesTable, parse_rgb, phi_gamma
 from kesbrdf.render.halfdiff_bsdf import HalfDiffTable, half_diff
-from kesbrdf.render.jit import opaque_rgb
+from kesbrdf.render.jit import opaque_float, opaque_rgb
 
 __all__ = ["FibrePriorBSDF", "PriorDrJit", "family_frame", "as_rgb", "register", "check_prior_model", "lobe_table",
            "PLUGIN"]
@@ -137,8 +137,19 @@ def _seeliger(ci, cr):
     return dr.select(ok, ci * cr / dr.select(ok, ci + cr, 1.0), 0.0)
 
 
-def _lobe_rho(cos_phi, rho: float):
-    return (1.0 - rho) ** 2 / (1.0 - 2.0 * rho * cos_phi + rho * rho) + 1e-4
+def _lobe_rho(cos_phi, rho):
+    """N(φ; ρ) = (1 − ρ)² / (1 − 2ρ cos φ + ρ²) + 10⁻⁴ (:mod:`kesbrdf.models.fibre_physics`);
+    ``rho`` a :class:`_LobeRho` of opaque constants."""
+    return rho.num / (rho.den - rho.two_rho * cos_phi) + 1e-4
+
+
+class _LobeRho:
+    """The constants of N(φ; ρ), computed in float64 as the literals were, kept opaque."""
+
+    def __init__(self, rho: float):
+        self.num = opaque_float((1.0 - rho) ** 2)
+        self.den = opaque_float(1.0 + rho * rho)
+        self.two_rho = opaque_float(2.0 * rho)
 
 
 def _dot(a, b):
@@ -154,14 +165,35 @@ def _cos_phi(wi, wr, t):
     return dr.clip(dr.select(den > 1e-30, _dot(pi, pr) / dr.maximum(den, 1e-30), 1.0), -1.0, 1.0)
 
 
-def family_frame(w, alpha: float):
-    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.models.fibre_physics's family frame."""
-    s, c = math.sin(alpha), math.cos(alpha)
+def family_frame(w, alpha):
+    """w in the frame of a family at angle α: (x' across, y' along, z) as kesbrdf.models.fibre_physics's family frame.
+
+    ``alpha`` is an angle (a constant of the code) or a ``(sin α, cos α)`` pair (a
+    fabric's axis, opaque so that the kernel does not depend on it)."""
+    s, c = (math.sin(alpha), math.cos(alpha)) if isinstance(alpha, (int, float)) else alpha
     return (s * w.x - c * w.y, c * w.x + s * w.y, w.z)
 
 
+#: Staple tilt nodes are evaluated in blocks of this many: the kernel depends on which
+#: blocks carry weight, not on the weights, so fabrics with similar tilt ranges share it.
+NODE_BLOCK = 4
+
+
+def _block_has_weight(w, k: int) -> bool:
+    """Whether node ``k``'s block of :data:`NODE_BLOCK` staple nodes has any non-zero weight."""
+    start = k - k % NODE_BLOCK
+    return bool(np.any(np.asarray(w[start:start + NODE_BLOCK]) != 0.0))
+
+
 class PriorDrJit:
-    """f_prior of a :class:`kesbrdf.models.fibre_physics.FibrePrior` in Dr.Jit (module docstring)."""
+    """f_prior of a :class:`kesbrdf.models.fibre_physics.FibrePrior` in Dr.Jit (module docstring).
+
+    The fabric's numbers (k_d, k_s, the tilt profile, ρ, the twist ψ, the axis offset, the
+    θ_d law) are opaque kernel parameters (:mod:`kesbrdf.render.jit`): the traced kernel
+    depends only on the prior's structure (filament/staple per family, free θ_d law,
+    which blocks of staple nodes carry weight), so the next fabric of a batch, or a
+    colourway, launches the kernel already compiled.
+    """
 
     def __init__(self, prior):
         from kesbrdf.models import fibre_physics as P
@@ -171,25 +203,31 @@ class PriorDrJit:
         p = prior.parameters()
         C = spec.n_channels
         self.kd = as_rgb(np.exp([p[f"log_kd_{c}"] for c in range(C)]))
+        self.kd_c = opaque_rgb(self.kd)
         self.offset = p["axis_offset"] if spec.free_axes else 0.0
-        self.d = (p["d1"], p["d2"]) if spec.free_theta_d else None
+        self.d = (opaque_float(p["d1"]), opaque_float(p["d2"])) if spec.free_theta_d else None
         self.f45 = float(fresnel_dielectric(math.cos(math.pi / 4), P.THETA_D_ETA))
         self.families = []
         for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, math.pi / 2)):
             lo, hi, log_s, c2, rho = (p[f"{fam}_{k}"] for k in ("u_lo", "u_hi", "log_s", "c2", "rho"))
             ks = as_rgb(np.exp([p[f"{fam}_log_ks_{c}"] for c in range(C)]))
-            entry = {"kind": kind, "alpha": alpha + self.offset, "ks": ks, "rho": rho,
-                     "shape": (lo, hi, math.exp(log_s), c2)}
+            a = alpha + self.offset
+            entry = {"kind": kind, "alpha": (opaque_float(math.sin(a)), opaque_float(math.cos(a))),
+                     "ks": ks, "ks_c": opaque_rgb(ks), "rho": _LobeRho(rho),
+                     "shape": tuple(opaque_float(v) for v in (lo, hi, 1.0 / math.exp(log_s), c2))}
             if kind == "staple":
                 psi = p[f"{fam}_psi"]
                 # P(u)·Δu at the fixed nodes: constants of the fitted model, in float64
                 w = P.tilt_profile(P.U_NODES, lo, hi, log_s, c2) * P.DU
-                entry.update(psi=psi, nodes=[(math.sin(u), math.cos(u), float(wu)) for u, wu in zip(P.U_NODES, w)])
+                entry.update(psi=tuple(opaque_float(v) for v in (math.tan(psi), math.sin(psi), math.cos(psi),
+                                                                   1.0 / abs(math.sin(psi)))),
+                             nodes=[(math.sin(u), math.cos(u), opaque_float(wu))
+                                    for k, (u, wu) in enumerate(zip(P.U_NODES, w)) if _block_has_weight(w, k)])
             self.families.append(entry)
 
     def _profile(self, u, shape):
-        lo, hi, s, c2 = shape
-        return _sigmoid((u - lo) * (1.0 / s)) * _sigmoid((hi - u) * (1.0 / s)) * dr.exp(dr.clip(c2 * u * u, -700.0, 50.0))
+        lo, hi, inv_s, c2 = shape
+        return _sigmoid((u - lo) * inv_s) * _sigmoid((hi - u) * inv_s) * dr.exp(dr.clip(c2 * u * u, -700.0, 50.0))
 
     def _filament(self, fam, h, i, r, norm_sum):
         hx, hy, hz = h
@@ -208,12 +246,9 @@ class PriorDrJit:
 
     def _staple(self, fam, h, i, r, norm_sum):
         hx, hy, hz = h
-        psi = fam["psi"]
-        tpsi, sp, cp = math.tan(psi), math.sin(psi), math.cos(psi)
+        tpsi, sp, cp, inv_abs_sp = fam["psi"]
         total = 0.0
         for su, cu, weight in fam["nodes"]:
-            if weight == 0.0:
-                continue
             A = hy * su + hz * cu
             Bq = hy * cu - hz * su
             D = Bq / (dr.sqrt(hx * hx + A * A) * tpsi)
@@ -226,7 +261,7 @@ class PriorDrJit:
             nh = dr.abs(_dot(n, h))
             g = dr.select(ok, _seeliger(_dot(n, i), _dot(n, r)) / dr.maximum(nh, 1e-9), 0.0)
             total = total + weight * _lobe_rho(_cos_phi(i, r, t), fam["rho"]) * g
-        return total / (norm_sum * abs(sp))
+        return total * inv_abs_sp / norm_sum
 
     def parts(self, wi, wr):
         """[warp part, weft part] (Color3f each): Φ(θ_d) k_s,j S_j, so that f_prior = k_d + Σ parts
@@ -242,12 +277,12 @@ class PriorDrJit:
         for fam in self.families:
             hf, i, r = family_frame(h, fam["alpha"]), family_frame(wi, fam["alpha"]), family_frame(wr, fam["alpha"])
             S = (self._filament if fam["kind"] == "filament" else self._staple)(fam, hf, i, r, norm_sum)
-            out.append(mi.Color3f(*[float(k) for k in fam["ks"]]) * (phi_td * S))
+            out.append(fam["ks_c"] * (phi_td * S))
         return out
 
     def __call__(self, wi, wr):
         """f_prior (Color3f) for unit directions above the horizon."""
-        f = mi.Color3f(*[float(k) for k in self.kd])
+        f = mi.Color3f(self.kd_c)
         for part in self.parts(wi, wr):
             f = f + part
         return f
@@ -264,11 +299,11 @@ class _Residual:
         self.mode = getattr(res, "mode", "line")
         if self.mode == "halfdiff":
             self.table = HalfDiffTable(table, res.theta_h_grid, res.theta_d_grid)
-            self.limit = float(res.theta_h_max)
+            self.limit = opaque_float(res.theta_h_max)
         else:
             self.table = KesTable(table, res.gamma_grid)
-            self.limit = float(res.gamma_max)
-            self.cos_line = math.cos(float(res.line_sum))
+            self.limit = opaque_float(res.gamma_max)
+            self.cos_line = opaque_float(math.cos(float(res.line_sum)))
 
     def __call__(self, wi, wr):
         if self.mode == "halfdiff":
