@@ -29,6 +29,7 @@ Options are passed to the chosen fitter; an option it does not accept is a one-l
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -197,7 +198,7 @@ def _protocol(name: str) -> str:
 PRIOR_CANDIDATES = {"prior": {"residual": False}, "prior+residual": {"residual": True}}
 
 
-def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = True, **options):
+def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = True, parameter_prior=None, **options):
     """Fit a model to ``measurement``; returns ``(model, FitReport)``.
 
     Parameters
@@ -216,6 +217,11 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
         residual only where it beats every comparison the data allow
         (:func:`kesbrdf.validate.selection.choose`; ``FitReport.comparison``).  It costs a few prior fits (seconds); ``False``
         skips it, and so does any fit option (options belong to one kind).
+    parameter_prior : None, "default", a JSON path or ParameterPrior
+        The Gaussian prior over the woven-cloth prior's parameters (MAP fit,
+        docs/prior.md §9), for every ``fibre-prior`` fit this call makes: the
+        comparison's and the final one when the prior is kept.  With an explicit
+        ``kind`` it is that kind's option.  None: the least-squares fit.
     **options
         Passed to the fitter; an option it does not accept is an error.
 
@@ -231,6 +237,12 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
     ('kes-halfdiff', True)
     """
     m = measurement
+    if isinstance(parameter_prior, (str, Path)):  # a file, or "default": the shipped prior
+        from kesbrdf.models.parameter_prior import load_prior
+
+        parameter_prior = load_prior(parameter_prior)
+    if parameter_prior is not None and kind != "auto":
+        options["parameter_prior"] = parameter_prior
     if kind == "auto":
         name, mask, why_not, why, counts = choose_fitter(m)
     else:
@@ -249,11 +261,13 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             mask, why_not = fitter_class(name).usable_rows(m)
             why = f"fibre-prior beat the scattered KES fit in {comparison['folds']}-fold cross-validation on this data"
     elif check == "loo":
-        comparison = _compare_with_prior(m)
+        comparison = _compare_with_prior(m, parameter_prior)
         if comparison and comparison["kept"] in PRIOR_CANDIDATES:
             name = "fibre-prior"
             mask, why_not = fitter_class(name).usable_rows(m)
             options = dict(PRIOR_CANDIDATES[comparison["kept"]])
+            if parameter_prior is not None:
+                options["parameter_prior"] = parameter_prior
             why = f"{comparison['kept']} kept by leave-one-orientation-out validation on this data ({comparison['why']})"
     elif check == "dense":
         comparison = _dense_rule(m)
@@ -306,7 +320,7 @@ def _kfold_with_prior(m) -> dict | None:
     return result
 
 
-def _compare_with_prior(m) -> dict | None:
+def _compare_with_prior(m, parameter_prior=None) -> dict | None:
     """:func:`kesbrdf.validate.selection.loo_compare` when the prior can use every row, with the
     candidate kept and why (:func:`kesbrdf.validate.selection.choose`)."""
     try:
@@ -319,7 +333,7 @@ def _compare_with_prior(m) -> dict | None:
     from kesbrdf.validate.selection import loo_compare
 
     try:
-        result = loo_compare(m)
+        result = loo_compare(m, **({} if parameter_prior is None else {"parameter_prior": parameter_prior}))
     except KesbrdfError:  # too few orientations to hold one out: nothing to compare
         return None
     from kesbrdf.validate.selection import choose

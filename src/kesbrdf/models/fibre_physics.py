@@ -693,15 +693,28 @@ def _residual_jacobian(spec, x, d: _Data):
     return r.reshape(-1), (J * g[..., None]).reshape(r.size, -1)
 
 
-def _solve(spec, x0, d: _Data, bounds, max_nfev):
+def _solve(spec, x0, d: _Data, bounds, max_nfev, penalty=None):
+    """Bounded least squares of the log residuals; with ``penalty`` = (cols, μ, w) from
+    :func:`_penalty_terms` the rows w·(θ[cols] − μ) of eq. (M1) (docs/prior.md §9) follow the data rows."""
     lo, hi = bounds
     x0 = np.clip(x0, lo + 1e-9, hi - 1e-9)
 
-    def fun(x):
-        return _residuals_batch(spec, x[None], d)[0]
+    if penalty is None:
+        def fun(x):
+            return _residuals_batch(spec, x[None], d)[0]
 
-    def jac(x):
-        return _residual_jacobian(spec, x, d)[1]
+        def jac(x):
+            return _residual_jacobian(spec, x, d)[1]
+    else:
+        cols, mu, w = penalty
+        jp = np.zeros((cols.size, len(x0)))
+        jp[np.arange(cols.size), cols] = w
+
+        def fun(x):
+            return np.concatenate([_residuals_batch(spec, x[None], d)[0], w * (x[cols] - mu)])
+
+        def jac(x):
+            return np.vstack([_residual_jacobian(spec, x, d)[1], jp])
 
     # lsmr: the dense SVD of the default solver took 0.5 s per iteration for 2700 residuals
     # with threaded BLAS on a loaded 2-core machine; lsmr gives the same optimum 10x faster.
@@ -713,8 +726,9 @@ def _solve(spec, x0, d: _Data, bounds, max_nfev):
 
 
 def _bic(res, d: _Data, k: int) -> float:
-    n = res.fun.size
-    rss = float(np.sum(res.fun**2))
+    """BIC of the data rows only (a MAP fit's penalty rows, which follow them, are left out)."""
+    n = d.y.size
+    rss = float(np.sum(res.fun[:n] ** 2))
     if d.has_sigma:
         return rss + k * math.log(n)
     return n * math.log(max(rss / n, 1e-300)) + k * math.log(n)
@@ -786,8 +800,48 @@ def _subsample(d: _Data, n_max: int, seed: int = 0) -> _Data:
     return _Data(d.wi[pick], d.wr[pick], d.y[pick], d.eps, d.sigma[pick], d.has_sigma)
 
 
+def _penalty_terms(parameter_prior, spec: PriorSpec, bounds, d: _Data):
+    """(cols, μ, w) of the MAP rows of eq. (M1) for one variant, or None (docs/prior.md §9).
+
+    w = √λ/s_k per parameter the prior knows; for data without uncertainties the log
+    residuals are in units of ln f, not of σ, so w is multiplied by
+    :data:`PENALTY_SIGMA_LOG` (the rows then weigh as against data of that σ)."""
+    if parameter_prior is None:
+        return None
+    cols, mu, w = parameter_prior.terms(spec, bounds)
+    if cols.size == 0:
+        return None
+    if not d.has_sigma:
+        w = w * PENALTY_SIGMA_LOG
+    return cols, mu, w
+
+
+#: Whether the multistart's short runs carry the MAP rows too (else only the polish of
+#: each variant's best start does; docs/prior.md §9).
+PENALTY_IN_STARTS = False
+
+
+def _with_prior_theta_d(spec: PriorSpec, x, parameter_prior):
+    """(spec, θ) with the θ_d law freed and d₁, d₂ at the prior's means (within their bounds)."""
+    spec2 = PriorSpec(spec.kinds, spec.n_channels, spec.free_axes, True)
+    idx2 = spec2.index()
+    x2 = np.zeros(len(idx2))
+    for name, v in zip(spec.names(), x):
+        x2[idx2[name]] = v
+    lo, hi = spec2.bounds()
+    for name in ("d1", "d2"):
+        i = idx2[name]
+        x2[i] = min(max(float(parameter_prior.mean[name]), lo[i]), hi[i])
+    return spec2, x2
+
+
+#: σ of ln f assumed for the MAP rows when the measurement carries no uncertainties
+#: (2 %, the simulated protocols' noise; docs/prior.md §9).
+PENALTY_SIGMA_LOG = 0.02
+
+
 def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None, max_nfev: int = 200,
-              bound_body: bool = False) -> FibrePrior:
+              bound_body: bool = False, parameter_prior=None) -> FibrePrior:
     """Fit the prior to a :class:`~kesbrdf.measure.measurement.Measurement` (module docstring).
 
     Parameters
@@ -809,6 +863,16 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
         ``fibre-prior`` kind fits k_d free: its parametric lobe cannot carry an in-plane
         floor, and bounded it predicted the leave-one-family-out hemispheres worse
         (docs/decisions.md, "The body term").
+    parameter_prior : None or :class:`kesbrdf.models.parameter_prior.ParameterPrior`
+        A Gaussian prior over the parameters (MAP fit, eq. M1 of docs/prior.md §9):
+        rows √λ (θ_k − μ_k)/s_k are appended to the residuals of the polish of each
+        variant's best start (the multistart itself is the least-squares one, see
+        :data:`PENALTY_IN_STARTS`).  When ``free_theta_d="auto"`` leaves the θ_d law
+        fixed (the data do not span θ_d) and the prior knows d₁, d₂, the law is freed
+        with d₁, d₂ at the prior's means (on the paper slice ωi·ωr = 0, the data do
+        not depend on them, so this is the MAP).  Variants are compared by the BIC of
+        the data rows at their MAP points.  None (the
+        default) is the plain least-squares fit, unchanged.
 
     Returns
     -------
@@ -819,10 +883,14 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     d = _prepare(m, rows)
     if free_axes == "auto":
         free_axes = "sample frame" in str(m.metadata.get("frame", "")).lower()
+    theta_d_from_prior = False
     if free_theta_d == "auto":
         x = np.sum(d.wi * d.wr, axis=-1)
         free_theta_d = (float(np.std(x)) > THETA_D_SPREAD
                         and int(np.count_nonzero(np.abs(x) > THETA_D_SPREAD)) >= MIN_THETA_D_SAMPLES)
+        # the data cannot pin the θ_d law: the prior's mean law is plugged in after the fit
+        # (exactly the MAP where ωi·ωr = 0 on every row, as in the paper protocol)
+        theta_d_from_prior = not free_theta_d and parameter_prior is not None and parameter_prior.knows_theta_d()
     C = d.y.shape[1]
     variants = [("filament", "filament")] if kinds == "auto" else [tuple(kinds)]
     if kinds == "auto":
@@ -853,27 +921,38 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
             bounds = spec.bounds(tuple(np.sign(p) if p else 1 for p in psi))
             if bound_body:
                 bounds = body_bounded(spec, bounds, d)
-            res = _solve(spec, x0, ds, bounds, n_start)
+            res = _solve(spec, x0, ds, bounds, n_start,
+                         _penalty_terms(parameter_prior, spec, bounds, ds) if PENALTY_IN_STARTS else None)
             if best is None or res.cost < best[0].cost:
                 best = (res, bounds)
         res, bounds = best
+        penalty = _penalty_terms(parameter_prior, spec, bounds, d)
         res = _solve(spec, res.x, d, bounds, max_nfev)
+        if penalty is not None:  # the MAP from the least-squares optimum (its basin: docs/prior.md §9)
+            res = _solve(spec, res.x, d, bounds, max_nfev, penalty)
         k = len(spec.names())
         bic = _bic(res, d, k)
         report["variants"]["/".join(kv)] = {
             "bic": bic, "cost": float(res.cost), "k": k, "seconds": time.perf_counter() - t_var,
-            "rms_log": float(np.sqrt(np.mean((res.fun * d.sigma.ravel()) ** 2))),
+            "rms_log": float(np.sqrt(np.mean((res.fun[:d.y.size] * d.sigma.ravel()) ** 2))),
         }
+        if penalty is not None:
+            report["variants"]["/".join(kv)]["penalty"] = float(0.5 * np.sum(res.fun[d.y.size:] ** 2))
         results.append((bic, spec, res.x))
         if kv == ("filament", "filament"):
             best_geometry = dict(zip(spec.names(), res.x))
     bic, spec, x = min(results, key=lambda r: r[0])
+    if theta_d_from_prior:
+        spec, x = _with_prior_theta_d(spec, x, parameter_prior)
     cov = _laplace_covariance(spec, np.asarray(x, float), d)
     report["chosen"] = "/".join(spec.kinds)
     report["seconds"] = time.perf_counter() - t0
     report["free_axes"] = bool(free_axes)
-    report["free_theta_d"] = bool(free_theta_d)
+    report["free_theta_d"] = bool(spec.free_theta_d)
     report["body_bounded"] = bool(bound_body)
+    if parameter_prior is not None:
+        report["parameter_prior"] = {"weight": float(parameter_prior.weight), "source": parameter_prior.source,
+                                     "theta_d_from_prior": theta_d_from_prior}
     return FibrePrior(spec, np.asarray(x, float), report, cov)
 
 

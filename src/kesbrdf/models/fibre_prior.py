@@ -42,6 +42,7 @@ kind against ``kes`` on the user's own data, for ``kind="auto"`` to use.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -53,6 +54,7 @@ from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import line_weight
 from kesbrdf.models.table import lookup
 from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
+from kesbrdf.models.parameter_prior import load_prior
 from kesbrdf.optics import fresnel_dielectric
 
 __all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "SIGMA_SCALES", "measured_support", "support_distance", "support_distance_parts", "misfit_level", "variance_parts", "off_support_variance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
@@ -95,7 +97,7 @@ class FibrePriorModel(ReflectanceModel):
     #: The class of :attr:`prior` read back by :meth:`from_payload` (a subclass kind with
     #: another prior, e.g. ``fibre-coord``, names its own).
     prior_class = FibrePrior
-    fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev")
+    fit_options = ("residual", "kinds", "free_axes", "free_theta_d", "max_nfev", "parameter_prior")
 
     def __init__(self, prior: FibrePrior, residual=None, channels=("value",), parameters=None,
                  diagnostics=None, input_info=None, kes=None, support=None, energy=None):
@@ -294,6 +296,8 @@ class FibrePriorModel(ReflectanceModel):
         residual_opt = options.pop("residual", "auto")
         m = measurement
         rows, _ = cls.usable_rows(m)
+        if isinstance(options.get("parameter_prior"), (str, Path)):  # a file, or "default" (docs/prior.md §9)
+            options["parameter_prior"] = load_prior(options["parameter_prior"])
         prior = fit_prior(m, rows=rows, **options)
         residual, note = None, "residual off"
         if residual_opt:
