@@ -261,7 +261,7 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             mask, why_not = fitter_class(name).usable_rows(m)
             why = f"fibre-prior beat the scattered KES fit in {comparison['folds']}-fold cross-validation on this data"
     elif check == "loo":
-        comparison = _compare_with_prior(m, parameter_prior)
+        comparison = _compare_with_prior(m, mask, parameter_prior)
         if comparison and comparison["kept"] in PRIOR_CANDIDATES:
             name = "fibre-prior"
             mask, why_not = fitter_class(name).usable_rows(m)
@@ -269,6 +269,8 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             if parameter_prior is not None:
                 options["parameter_prior"] = parameter_prior
             why = f"{comparison['kept']} kept by leave-one-orientation-out validation on this data ({comparison['why']})"
+            if comparison.get("compared_on"):
+                why += f"; {comparison['compared_on']}"
     elif check == "dense":
         comparison = _dense_rule(m)
         if comparison and comparison["kept"] != name:
@@ -320,9 +322,20 @@ def _kfold_with_prior(m) -> dict | None:
     return result
 
 
-def _compare_with_prior(m, parameter_prior=None) -> dict | None:
+def _compare_with_prior(m, rows=None, parameter_prior=None) -> dict | None:
     """:func:`kesbrdf.validate.selection.loo_compare` when the prior can use every row, with the
-    candidate kept and why (:func:`kesbrdf.validate.selection.choose`)."""
+    candidate kept and why (:func:`kesbrdf.validate.selection.choose`).
+
+    ``rows``: the rows the row-based choice (``kes``) fits.  When they are a subset (the
+    paper's incidence lines beside extra samples the subset rule set aside: another
+    incidence angle, a few out-of-plane pairs), the comparison runs on that subset, so
+    the extras change nothing in the decision (docs/models.md, "More rows never predict
+    worse"); a prior kept then fits every row, and the extras pin what the incidence
+    line cannot (the θ_d law: the paper's line has θ_d = 45° everywhere).  Before, the
+    leave-one-orientation-out comparison refused a measurement with extras and ``kes``
+    was kept without one (issue 20: one extra incidence line made the default's
+    hemispheres 0.18 → 0.60 on an Irawan silk).
+    """
     try:
         prior_cls = fitter_class("fibre-prior")
     except (ImportError, KesbrdfError):  # the prior needs scipy (extra "fit")
@@ -332,13 +345,19 @@ def _compare_with_prior(m, parameter_prior=None) -> dict | None:
         return None
     from kesbrdf.validate.selection import loo_compare
 
+    subset = rows is not None and not np.all(rows)
     try:
-        result = loo_compare(m, **({} if parameter_prior is None else {"parameter_prior": parameter_prior}))
+        result = loo_compare(m.subset(rows) if subset else m,
+                             **({} if parameter_prior is None else {"parameter_prior": parameter_prior}))
     except KesbrdfError:  # too few orientations to hold one out: nothing to compare
         return None
     from kesbrdf.validate.selection import choose
 
     result["kept"], result["why"] = choose(result)
+    if subset:
+        n = int(np.count_nonzero(rows))
+        result["compared_on"] = (f"compared on the {n} incidence-line rows; the prior kept fits all {len(m)} "
+                                 f"(the {len(m) - n} others pin its theta_d law)")
     return result
 
 

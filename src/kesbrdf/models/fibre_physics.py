@@ -111,12 +111,25 @@ _F45 = float(fresnel_dielectric(math.cos(math.pi / 4), THETA_D_ETA))
 
 @dataclass(frozen=True)
 class PriorSpec:
-    """Structure of a prior: family kinds, channel count, free axes, free θ_d law."""
+    """Structure of a prior: family kinds, channel count, free axes, free θ_d law.
+
+    ``theta_d_range``: the (min, max) of x = ωi·ωr over the rows the free θ_d law was
+    fitted on.  Outside it the law is held at its value at the nearer end (docs/prior.md, "θ_d law":
+    exp(d₁x + d₂x²) with x clipped): a quadratic in the exponent fitted on one extra
+    incidence line otherwise extrapolates to e^±12 at retro-reflection (x → 1), which the
+    paper's line and one other line never see.  None: not clipped (files written before
+    the range was kept, and a θ_d law that did not come from the data).
+    """
 
     kinds: tuple = ("filament", "filament")
     n_channels: int = 1
     free_axes: bool = False
     free_theta_d: bool = False
+    theta_d_range: tuple | None = None
+
+    def held_x(self, x):
+        """x = ωi·ωr as the θ_d law reads it: clipped to :attr:`theta_d_range` when set."""
+        return x if self.theta_d_range is None else np.clip(x, *self.theta_d_range)
 
     def names(self) -> list[str]:
         return list(_spec_names(self))
@@ -457,6 +470,7 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
     norm_sum, h, Phi, x = _cached(cache, "base", lambda: _base(wi, wr))
     Phi = Phi[None, :]
     if spec.free_theta_d:
+        x = spec.held_x(x)
         Phi = Phi * np.exp(np.clip(col("d1") * x[None] + col("d2") * x[None] ** 2, -50, 50))
     offset = col("axis_offset")[:, 0] if spec.free_axes else np.zeros(B)
     f = np.exp(theta[:, [idx[f"log_kd_{c}"] for c in range(C)]])[:, None, :] + 0.0 * norm_sum[None, :, None]
@@ -529,6 +543,7 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
     norm_sum, h, Phi0, x = _cached(cache, "base", lambda: _base(wi, wr))
     Phi = Phi0
     if spec.free_theta_d:
+        x = spec.held_x(x)
         q = t("d1") * x + t("d2") * x * x
         Phi = Phi0 * np.exp(np.clip(q, -50, 50))
     offset = t("axis_offset") if spec.free_axes else 0.0
@@ -614,6 +629,7 @@ class FibrePrior:
     def to_dict(self) -> dict:
         return {"kinds": list(self.spec.kinds), "n_channels": self.spec.n_channels,
                 "free_axes": self.spec.free_axes, "free_theta_d": self.spec.free_theta_d,
+                **({} if self.spec.theta_d_range is None else {"theta_d_range": list(self.spec.theta_d_range)}),
                 "theta": dict(zip(self.spec.names(), map(float, self.theta))),
                 "cov": None if self.cov is None else np.asarray(self.cov).tolist()}
 
@@ -629,7 +645,12 @@ class FibrePrior:
 
     @classmethod
     def from_dict(cls, d: dict) -> "FibrePrior":
-        spec = PriorSpec(tuple(d["kinds"]), int(d["n_channels"]), bool(d["free_axes"]), bool(d["free_theta_d"]))
+        held = d.get("theta_d_range")
+        if held is not None:
+            held = tuple(float(v) for v in held)
+            if len(held) != 2 or not all(math.isfinite(v) for v in held) or held[0] > held[1]:
+                raise MeasurementError(f"fibre prior theta_d_range: expected [min, max] of finite numbers, got {d['theta_d_range']!r}")
+        spec = PriorSpec(tuple(d["kinds"]), int(d["n_channels"]), bool(d["free_axes"]), bool(d["free_theta_d"]), held)
         names = spec.names()
         missing = [n for n in names if n not in d["theta"]]
         if missing:
@@ -884,8 +905,8 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     if free_axes == "auto":
         free_axes = "sample frame" in str(m.metadata.get("frame", "")).lower()
     theta_d_from_prior = False
+    x = np.sum(d.wi * d.wr, axis=-1)
     if free_theta_d == "auto":
-        x = np.sum(d.wi * d.wr, axis=-1)
         free_theta_d = (float(np.std(x)) > THETA_D_SPREAD
                         and int(np.count_nonzero(np.abs(x) > THETA_D_SPREAD)) >= MIN_THETA_D_SAMPLES)
         # the data cannot pin the θ_d law: the prior's mean law is plugged in after the fit
@@ -902,7 +923,8 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     best_geometry = None
     results = []
     for kv in variants:
-        spec = PriorSpec(kv, C, bool(free_axes), bool(free_theta_d))
+        spec = PriorSpec(kv, C, bool(free_axes), bool(free_theta_d),
+                         (float(x.min()), float(x.max())) if free_theta_d else None)
         if kv == ("filament", "filament"):
             starts = [(uh, rho, (0, 0), off) for uh in (6.0, 20.0, 45.0) for rho in (0.0, 0.6) for off in offsets]
             if free_axes:

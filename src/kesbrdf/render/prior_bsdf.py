@@ -206,6 +206,8 @@ class PriorDrJit:
         self.kd_c = opaque_rgb(self.kd)
         self.offset = p["axis_offset"] if spec.free_axes else 0.0
         self.d = (opaque_float(p["d1"]), opaque_float(p["d2"])) if spec.free_theta_d else None
+        held = spec.theta_d_range if spec.free_theta_d else None
+        self.held = None if held is None else tuple(opaque_float(v) for v in held)
         self.f45 = float(fresnel_dielectric(math.cos(math.pi / 4), P.THETA_D_ETA))
         self.families = []
         for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, math.pi / 2)):
@@ -272,6 +274,8 @@ class PriorDrJit:
         phi_td = fresnel_dielectric(dr.dot(wi, h), self.P.THETA_D_ETA, dr) * (1.0 / self.f45)
         if self.d is not None:
             x = dr.dot(wi, wr)
+            if self.held is not None:  # the law held outside the fitted range (PriorSpec.theta_d_range)
+                x = dr.clip(x, self.held[0], self.held[1])
             phi_td = phi_td * dr.exp(dr.clip(self.d[0] * x + self.d[1] * x * x, -50.0, 50.0))
         out = []
         for fam in self.families:

@@ -1,0 +1,88 @@
+"""Extra samples beside the paper's incidence lines (issue 20): the default's decision is
+made on the incidence lines alone, a kept prior fits every row, and the prior's free θ_d
+law is held outside the range of ωi·ωr it was fitted on (docs/models.md, "More rows
+never predict worse"; docs/prior.md, "θ_d law")."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from kesbrdf.fitting import fit
+from kesbrdf.geometry import spherical_to_cartesian
+from kesbrdf.measure import planning
+from kesbrdf.models.fibre_physics import FibrePrior, PriorSpec
+from kesbrdf.references.irawan2012 import Irawan2012
+
+#: Relative agreement of the held θ_d law with exp(d₁x̂ + d₂x̂²), x̂ clipped: the law is
+#: one multiplication of float64 values, so only rounding separates them.
+HELD_LAW_RTOL = 1e-12
+#: The θ_d law a quadratic can reach at retro-reflection (x = 1) with d₂ at its bound
+#: when nothing holds it: e^12 ≈ 1.6e5.  Held at the fitted range's end it stays within
+#: this factor of the lobe at the paper's x = 0.
+HELD_LAW_MAX = 20.0
+
+
+def _lobe_prior(held):
+    spec = PriorSpec(("filament", "filament"), 1, False, True, held)
+    idx = spec.index()
+    x = np.zeros(len(idx))
+    x[idx["log_kd_0"]] = -40.0  # no body: f is the lobes alone
+    for fam in ("warp", "weft"):
+        x[idx[f"{fam}_log_ks_0"]] = math.log(0.3)
+        x[idx[f"{fam}_u_lo"]], x[idx[f"{fam}_u_hi"]] = -math.radians(30), math.radians(30)
+        x[idx[f"{fam}_log_s"]] = math.log(math.radians(8))
+        x[idx[f"{fam}_rho"]] = 0.3
+    x[idx["d1"]], x[idx["d2"]] = 1.5, 6.0
+    return FibrePrior(spec, x)
+
+
+def test_the_theta_d_law_is_held_outside_its_fitted_range():
+    rng = np.random.default_rng(4)
+    n = 400
+    wi = spherical_to_cartesian(rng.uniform(0.05, 1.4, n), rng.uniform(0, 2 * np.pi, n))
+    wr = spherical_to_cartesian(rng.uniform(0.05, 1.4, n), rng.uniform(0, 2 * np.pi, n))
+    wr[:40] = wi[:40]  # retro-reflection: x = 1
+    held, free = _lobe_prior((-0.5, 0.3)), _lobe_prior(None)
+    law = PriorSpec(("filament", "filament"), 1, False, False)
+    base = FibrePrior(law, np.delete(held.theta, [held.spec.index()["d1"], held.spec.index()["d2"]]))
+    x = np.sum(wi * wr, -1)
+    xc = np.clip(x, -0.5, 0.3)
+    want = base(wi, wr)[:, 0] * np.exp(1.5 * xc + 6.0 * xc * xc)
+    np.testing.assert_allclose(held(wi, wr)[:, 0], want, rtol=HELD_LAW_RTOL, atol=1e-300)
+    # without the range the same law runs away at retro-reflection; held, it cannot
+    ratio_free = free(wi[:40], wr[:40])[:, 0] / base(wi[:40], wr[:40])[:, 0]
+    ratio_held = held(wi[:40], wr[:40])[:, 0] / base(wi[:40], wr[:40])[:, 0]
+    assert np.all(ratio_free > 1e3) and np.all(ratio_held <= HELD_LAW_MAX)
+
+
+def test_the_range_is_kept_in_the_model_file_and_checked():
+    prior = _lobe_prior((-0.5, 0.3))
+    back = FibrePrior.from_dict(prior.to_dict())
+    assert back.spec.theta_d_range == (-0.5, 0.3)
+    assert FibrePrior.from_dict({k: v for k, v in prior.to_dict().items() if k != "theta_d_range"}).spec.theta_d_range is None
+    from kesbrdf.errors import MeasurementError
+
+    with pytest.raises(MeasurementError, match=r"theta_d_range: expected \[min, max\]"):
+        FibrePrior.from_dict({**prior.to_dict(), "theta_d_range": [0.3, -0.5]})
+
+
+@pytest.fixture(scope="module")
+def silk_with_a_second_line():
+    """Irawan's silk charmeuse: the paper's 116 samples and a second incidence line (θ_i =
+    30°, 56 samples), 2 % noise: the protocol `kesbrdf plan` calls paper+line30."""
+    return planning.simulate(Irawan2012("silk_charmeuse"), ("paper", "line:30"), noise=0.02, rng=0)
+
+
+def test_extras_leave_the_decision_to_the_incidence_lines_and_the_prior_fits_every_row(silk_with_a_second_line):
+    m = silk_with_a_second_line
+    model, report = fit(m)
+    # before, the comparison refused the extra line and kes was kept on the 116 rows
+    assert report.kind == "fibre-prior" and report.rows_used == len(m) == 172
+    assert "compared on the 116 incidence-line rows" in report.reason
+    assert model.prior.spec.free_theta_d and model.prior.spec.theta_d_range is not None
+    lo, hi = model.prior.spec.theta_d_range
+    x = np.sum(m.wi * m.wr, -1)
+    assert lo == pytest.approx(x.min()) and hi == pytest.approx(x.max())
