@@ -51,6 +51,15 @@ def prior_files(tmp_path_factory):
     }
     first = models["paper-filament"]
     models["pure-prior"] = FibrePriorModel(first.prior, None, channels=first.channels)
+    # the dense fit's free θ_d law held outside a narrow range of ωi·ωr (PriorSpec.theta_d_range)
+    from dataclasses import replace
+
+    from kesbrdf.models.fibre_physics import FibrePrior
+
+    staple = models["dense-staple"].prior
+    held = FibrePrior(replace(staple.spec, theta_d_range=(-0.3, 0.2)), staple.theta, staple.report, staple.cov)
+    assert held.spec.free_theta_d
+    models["held-theta-d"] = FibrePriorModel(held, None, channels=first.channels)
     # the satin fits need no energy scale (albedo < 0.95): hand-set tables of g in
     # [0.2, 1] with different values per channel exercise the plugin's lookup, over
     # cos θ as fits write it and over (cos θ, φ) as energy_scale also reads
@@ -86,11 +95,11 @@ def _load(path, **kw):
 
 
 @pytest.mark.parametrize("name", ["paper-filament", "paper-staple", "dense-staple", "pure-prior", "energy-scaled",
-                                  "energy-scaled-phi"])
+                                  "energy-scaled-phi", "held-theta-d"])
 def test_eval_agrees_with_numpy(render_module, prior_files, rng, name):
     path, model = prior_files[name]
-    assert model.prior.spec.kinds == {"paper-staple": ("staple", "filament"),
-                                      "dense-staple": ("filament", "staple")}.get(name, ("filament", "filament"))
+    assert model.prior.spec.kinds == {"paper-staple": ("staple", "filament"), "dense-staple": ("filament", "staple"),
+                                      "held-theta-d": ("filament", "staple")}.get(name, ("filament", "filament"))
     wi, wr = _pairs(rng)
     got = _eval(_load(path), wi, wr)
     want = model.evaluate(wi, wr)
