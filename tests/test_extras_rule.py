@@ -63,9 +63,9 @@ def test_the_range_is_kept_in_the_model_file_and_checked():
     back = FibrePrior.from_dict(prior.to_dict())
     assert back.spec.theta_d_range == (-0.5, 0.3)
     assert FibrePrior.from_dict({k: v for k, v in prior.to_dict().items() if k != "theta_d_range"}).spec.theta_d_range is None
-    from kesbrdf.errors import MeasurementError
+    from kesbrdf.errors import ModelError
 
-    with pytest.raises(MeasurementError, match=r"theta_d_range: expected \[min, max\]"):
+    with pytest.raises(ModelError, match=r"theta_d_range: expected \[min, max\]"):
         FibrePrior.from_dict({**prior.to_dict(), "theta_d_range": [0.3, -0.5]})
 
 
@@ -86,3 +86,80 @@ def test_extras_leave_the_decision_to_the_incidence_lines_and_the_prior_fits_eve
     lo, hi = model.prior.spec.theta_d_range
     x = np.sum(m.wi * m.wr, -1)
     assert lo == pytest.approx(x.min()) and hi == pytest.approx(x.max())
+
+
+def test_the_decision_with_extras_is_the_decision_on_the_lines_alone(silk_with_a_second_line):
+    from kesbrdf.fitting import choose_fitter
+
+    m = silk_with_a_second_line
+    _, lines, _, _, _ = choose_fitter(m)
+    assert 0 < np.count_nonzero(lines) < len(m)
+    _, with_extras = fit(m)
+    _, on_lines = fit(m.subset(lines))
+    assert with_extras.comparison["kept"] == on_lines.comparison["kept"] == "prior+residual"
+    assert with_extras.comparison["median_biases"] == on_lines.comparison["median_biases"]
+
+
+def test_a_model_file_keeps_the_range_and_a_hostile_one_is_one_line(silk_with_a_second_line, tmp_path):
+    import json
+
+    from kesbrdf.errors import ModelError
+    from kesbrdf.io.model_file import load_model
+
+    model, _ = fit(silk_with_a_second_line)
+    path = tmp_path / "silk.kes.json"
+    model.save(path)
+    back = load_model(path)
+    assert back.prior.spec.theta_d_range == model.prior.spec.theta_d_range
+    wi = spherical_to_cartesian(np.full(5, 1.2), np.linspace(0, 3, 5))
+    np.testing.assert_allclose(back.evaluate(wi, wi), model.evaluate(wi, wi), rtol=1e-12)  # retro: held
+    doc = json.loads(path.read_text())
+
+    def find(d):
+        if isinstance(d, dict):
+            if "theta_d_range" in d:
+                return d
+            return next((r for r in map(find, d.values()) if r is not None), None)
+        return None
+
+    for bad in ("ab", 3, [None, 1], [0.5, -0.5], [0.1, "x"]):  # (NaN is not JSON: the reader refuses it first)
+        find(doc)["theta_d_range"] = bad
+        hostile = tmp_path / "hostile.kes.json"
+        hostile.write_text(json.dumps(doc))
+        with pytest.raises(ModelError) as err:
+            load_model(hostile)
+        assert "theta_d_range" in str(err.value) and "\n" not in str(err.value), bad
+
+
+@pytest.mark.parametrize("value, message", [
+    (123, "parameter_prior: expected None, 'default', a JSON file or a ParameterPrior, got int"),
+    ("no-such-prior.json", "no-such-prior.json: cannot read the parameter prior"),
+])
+def test_a_bad_parameter_prior_is_one_line(value, message, silk_with_a_second_line):
+    from kesbrdf.errors import ModelError
+
+    with pytest.raises(ModelError) as err:
+        fit(silk_with_a_second_line, parameter_prior=value)
+    assert str(err.value).startswith(message) and "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("doc, message", [
+    ([], "expected a JSON object, got list"),
+    ({"schema": "kesbrdf.parameter_prior/1", "parameters": {"warp_rho": 1}}, "expected a finite mean"),
+    ({"schema": "kesbrdf.parameter_prior/1", "parameters": {"warp_rhoo": {"mean": 0, "sd": 1}}}, "unknown parameter 'warp_rhoo'"),
+    ({"schema": "kesbrdf.parameter_prior/1", "parameters": {}, "weight": "x"}, "bad: weight"),
+])
+def test_a_hostile_parameter_prior_file_is_one_line(doc, message, tmp_path):
+    import json
+
+    from kesbrdf.errors import ModelError
+    from kesbrdf.models.parameter_prior import load_prior
+
+    path = tmp_path / "prior.json"
+    path.write_text(json.dumps(doc))
+    with pytest.raises(ModelError) as err:
+        load_prior(path)
+    assert message in str(err.value) and "\n" not in str(err.value)
+    path.write_text("{not json")
+    with pytest.raises(ModelError, match="unreadable JSON"):
+        load_prior(path)

@@ -229,19 +229,42 @@ def test_the_checker_sees_violations(tmp_path, monkeypatch, source, expected):
 _OUTSIDE_THE_PACKAGE = ("tests", "benchmarks", "docs")
 
 
+#: Calls that join path parts: os.path.join, Path(...), PurePath(...), p.joinpath(...).
+_JOINS = {"join", "joinpath", "Path", "PurePath"}
+
+
 def _reaches_outside(source: str) -> list[str]:
-    """Paths in ``source`` into a source-tree folder outside the package: a string that
-    starts ``tests/`` (etc.), or the folder's name as an operand of a ``/`` path join.
-    (A bare word elsewhere, such as a dict key ``"tests"``, is not a path.)"""
+    """Paths in ``source`` into a source-tree folder outside the package: a string (or an
+    f-string's text) that starts ``tests/`` or ``./tests/`` (etc.), or the folder's name
+    as an operand of a ``/`` path join or an argument of a joining call.  (A bare word
+    elsewhere, such as a dict key ``"tests"``, is not a path.)"""
+    def folder(part: str) -> str:
+        part = part.replace("\\", "/")
+        while part.startswith("./"):
+            part = part[2:]
+        return part.split("/", 1)[0]
+
+    def is_folder(node) -> bool:
+        return isinstance(node, ast.Constant) and isinstance(node.value, str) and folder(node.value) in _OUTSIDE_THE_PACKAGE
+
     found = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Constant) and isinstance(node.value, str):
-            if node.value.replace("\\", "/").split("/", 1)[0] in _OUTSIDE_THE_PACKAGE and "/" in node.value:
+            if "/" in node.value and is_folder(node):
                 found.append(node.value)
+        elif isinstance(node, ast.JoinedStr):  # f"{root}/tests/data": the text after a value
+            for part in node.values:
+                if isinstance(part, ast.Constant) and isinstance(part.value, str):
+                    text = part.value.lstrip("/")
+                    if "/" in part.value and folder(text) in _OUTSIDE_THE_PACKAGE:
+                        found.append(part.value)
         elif isinstance(node, ast.BinOp) and isinstance(node.op, ast.Div):
-            found += [side.value for side in (node.left, node.right)
-                      if isinstance(side, ast.Constant) and side.value in _OUTSIDE_THE_PACKAGE]
-    return found
+            found += [side.value for side in (node.left, node.right) if is_folder(side)]
+        elif isinstance(node, ast.Call):
+            name = node.func.attr if isinstance(node.func, ast.Attribute) else getattr(node.func, "id", "")
+            if name in _JOINS:
+                found += [arg.value for arg in node.args if is_folder(arg)]
+    return sorted(set(found), key=found.index)
 
 
 def test_the_package_reads_nothing_from_the_source_tree():
@@ -261,7 +284,15 @@ def test_the_package_reads_nothing_from_the_source_tree():
     assert not bad, f"modules that read the source tree outside the package: {bad}"
 
 
-def test_the_source_tree_check_can_fail():
-    assert _reaches_outside('Path(here).parents[3] / "tests" / "data" / "rgl"') == ["tests"]
-    assert _reaches_outside('open("tests/data/x.csv")') == ["tests/data/x.csv"]
-    assert _reaches_outside('row["tests"] = 1; print("the tests pass")') == []
+@pytest.mark.parametrize("source, expected", [
+    ('Path(here).parents[3] / "tests" / "data" / "rgl"', ["tests"]),
+    ('open("tests/data/x.csv")', ["tests/data/x.csv"]),
+    ('open("./tests/x")', ["./tests/x"]),
+    ('os.path.join(root, "tests", "data")', ["tests"]),
+    ('Path(root, "benchmarks")', ["benchmarks"]),
+    ('root.joinpath("docs")', ["docs"]),
+    ('f"{root}/tests/data"', ["/tests/data"]),
+    ('row["tests"] = 1; print("the tests pass")', []),
+])
+def test_the_source_tree_check_can_fail(source, expected):
+    assert _reaches_outside(source) == expected

@@ -29,7 +29,6 @@ Options are passed to the chosen fitter; an option it does not accept is a one-l
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
@@ -237,10 +236,10 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
     ('kes-halfdiff', True)
     """
     m = measurement
-    if isinstance(parameter_prior, (str, Path)):  # a file, or "default": the shipped prior
-        from kesbrdf.models.parameter_prior import load_prior
+    if parameter_prior is not None:  # a prior, a file, or "default": the shipped prior
+        from kesbrdf.models.parameter_prior import as_parameter_prior
 
-        parameter_prior = load_prior(parameter_prior)
+        parameter_prior = as_parameter_prior(parameter_prior)
     if parameter_prior is not None and kind != "auto":
         options["parameter_prior"] = parameter_prior
     if kind == "auto":
@@ -260,6 +259,8 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
             name = "fibre-prior"
             mask, why_not = fitter_class(name).usable_rows(m)
             why = f"fibre-prior beat the scattered KES fit in {comparison['folds']}-fold cross-validation on this data"
+            if parameter_prior is not None:  # the folds were fitted without it (kfold_compare)
+                options["parameter_prior"] = parameter_prior
     elif check == "loo":
         comparison = _compare_with_prior(m, mask, parameter_prior)
         if comparison and comparison["kept"] in PRIOR_CANDIDATES:
@@ -297,6 +298,8 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
         warnings=list(getattr(model, "warnings", [])),
         comparison=comparison,
     )
+    if parameter_prior is not None and "parameter_prior" not in options:
+        report.warnings.append(f"parameter_prior not used: the model is {model.kind}, fitted without the fibre prior")
     if isinstance(model.diagnostics, dict):
         model.diagnostics["fit_report"] = report.to_dict()
     return model, report
@@ -356,8 +359,8 @@ def _compare_with_prior(m, rows=None, parameter_prior=None) -> dict | None:
     result["kept"], result["why"] = choose(result)
     if subset:
         n = int(np.count_nonzero(rows))
-        result["compared_on"] = (f"compared on the {n} incidence-line rows; the prior kept fits all {len(m)} "
-                                 f"(the {len(m) - n} others pin its theta_d law)")
+        result["compared_on"] = (f"compared on the {n} incidence-line rows; a prior kept fits all {len(m)} "
+                                 f"(the {len(m) - n} others free its theta_d law when they spread wi.wr)")
     return result
 
 

@@ -61,8 +61,6 @@ def _kes(reference):
 @pytest.fixture(scope="module")
 def fabrics():
     """KES models of the demo's black satin, a cotton twill and a white felt (simulate → fit)."""
-    from pathlib import Path
-
     from kesbrdf.references.irawan2012 import Irawan2012
     from kesbrdf.references.registry import make_reference
     from kesbrdf.references.rgl_tensor import RGLTensorBRDF

@@ -1,14 +1,13 @@
 """Importers: RGL tensor files read in numpy, MERL .binary files, as reference BRDFs."""
 
 import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from kesbrdf.errors import FormatError
-from source_helpers import merl_bin_centres, pairs_from_half_diff, write_merl
 from kesbrdf.references.registry import SHIPPED_RGL_DIR
+from source_helpers import merl_bin_centres, pairs_from_half_diff, write_merl
 
 FELT = SHIPPED_RGL_DIR / "acrylic_felt_white_rgb.bsdf"
 HAS_MITSUBA = importlib.util.find_spec("mitsuba") is not None

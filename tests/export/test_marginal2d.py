@@ -2,7 +2,6 @@
 tensor-file container round trip."""
 
 import importlib.util
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -9,7 +9,6 @@ All numbers below were measured on ``src/kesbrdf/data/rgl/acrylic_felt_white_rgb
 
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

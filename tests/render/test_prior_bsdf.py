@@ -206,7 +206,10 @@ def test_a_new_fabric_of_the_same_structure_reuses_the_compiled_kernel(render_mo
         launched = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, was)
-    assert launched and all(k["cache_hit"] for k in launched), [(k["hash"], k["cache_hit"]) for k in launched]
+    # hits in memory, not on disk: with literals the second fabric's kernel is new to this
+    # process (it may still be on the disk cache from an earlier run of the test)
+    assert launched and all(k["cache_hit"] and not k.get("cache_disk", False) for k in launched), \
+        [(k["hash"], k["cache_hit"], k.get("cache_disk")) for k in launched]
     # the reused kernel read the new fabric's numbers: the image changed
     assert np.abs(second - first).max() > 1e-3 * np.abs(first).max()
 

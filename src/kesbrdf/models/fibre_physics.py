@@ -63,7 +63,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from kesbrdf.errors import MeasurementError
+from kesbrdf.errors import MeasurementError, ModelError
 from kesbrdf.models.body import log_body_upper
 from kesbrdf.models.mappings import evaluate_pairs
 from kesbrdf.optics import fresnel_dielectric
@@ -126,6 +126,17 @@ class PriorSpec:
     free_axes: bool = False
     free_theta_d: bool = False
     theta_d_range: tuple | None = None
+
+    def __post_init__(self):
+        if self.theta_d_range is not None:  # a (min, max) pair of floats: hashable, checked
+            try:
+                lo, hi = (float(v) for v in self.theta_d_range)
+            except (TypeError, ValueError):
+                lo = hi = float("nan")
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo <= hi):
+                raise ModelError(f"fibre prior theta_d_range: expected [min, max] of finite numbers, got "
+                                 f"{str(self.theta_d_range)[:60]}")
+            object.__setattr__(self, "theta_d_range", (lo, hi))
 
     def held_x(self, x):
         """x = ωi·ωr as the θ_d law reads it: clipped to :attr:`theta_d_range` when set."""
@@ -526,7 +537,8 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
       ∂f/∂θ = Φ k_s,j ∂S_j/∂θ with ∂P/∂θ of :func:`_profile_derivatives` and ∂N/∂ρ of
       :func:`_lobe_rho_derivative`; for a staple family the derivative sits inside the
       tilt sum, ∂S/∂θ = Σ_u ∂(P N)/∂θ Δu G;
-    * d₁, d₂: ∂f/∂d_k = x^k Φ Σ_j k_s,j S_j (x = ωi·ωr; 0 where the exponent clips);
+    * d₁, d₂: ∂f/∂d_k = x̂^k Φ Σ_j k_s,j S_j (x̂ = ωi·ωr held to ``spec.theta_d_range``,
+      a constant in d; 0 where the exponent clips);
     * the twist ψ_j of a staple family, from the ψ-derivatives of the cached geometry
       (:func:`_staple_geometry`): ∂S/∂ψ = Σ_u P Δu (∂N/∂cos φ · ∂cos φ/∂ψ · G + N ∂G/∂ψ).
 
@@ -645,12 +657,8 @@ class FibrePrior:
 
     @classmethod
     def from_dict(cls, d: dict) -> "FibrePrior":
-        held = d.get("theta_d_range")
-        if held is not None:
-            held = tuple(float(v) for v in held)
-            if len(held) != 2 or not all(math.isfinite(v) for v in held) or held[0] > held[1]:
-                raise MeasurementError(f"fibre prior theta_d_range: expected [min, max] of finite numbers, got {d['theta_d_range']!r}")
-        spec = PriorSpec(tuple(d["kinds"]), int(d["n_channels"]), bool(d["free_axes"]), bool(d["free_theta_d"]), held)
+        spec = PriorSpec(tuple(d["kinds"]), int(d["n_channels"]), bool(d["free_axes"]), bool(d["free_theta_d"]),
+                         d.get("theta_d_range"))
         names = spec.names()
         missing = [n for n in names if n not in d["theta"]]
         if missing:

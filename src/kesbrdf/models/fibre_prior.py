@@ -42,7 +42,6 @@ kind against ``kes`` on the user's own data, for ``kind="auto"`` to use.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -54,7 +53,7 @@ from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import line_weight
 from kesbrdf.models.table import lookup
 from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
-from kesbrdf.models.parameter_prior import load_prior
+from kesbrdf.models.parameter_prior import as_parameter_prior
 from kesbrdf.optics import fresnel_dielectric
 
 __all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "SIGMA_SCALES", "measured_support", "support_distance", "support_distance_parts", "misfit_level", "variance_parts", "off_support_variance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
@@ -296,13 +295,15 @@ class FibrePriorModel(ReflectanceModel):
         residual_opt = options.pop("residual", "auto")
         m = measurement
         rows, _ = cls.usable_rows(m)
-        if isinstance(options.get("parameter_prior"), (str, Path)):  # a file, or "default" (docs/prior.md §9)
-            options["parameter_prior"] = load_prior(options["parameter_prior"])
+        if options.get("parameter_prior") is not None:  # a prior, a file, or "default" (docs/prior.md §9)
+            options["parameter_prior"] = as_parameter_prior(options["parameter_prior"])
         prior = fit_prior(m, rows=rows, **options)
         residual, note = None, "residual off"
         if residual_opt:
             try:
-                residual, note = _fit_residual(prior, m.subset(rows)), "KES residual on the incidence line"
+                residual = _fit_residual(prior, m.subset(rows))
+                note = ("(phi_h, theta_h, theta_d) residual over several incidence lines"
+                        if getattr(residual, "mode", "line") == "halfdiff" else "KES residual on the incidence line")
             except MeasurementError as exc:
                 if residual_opt is True:
                     raise
@@ -311,7 +312,9 @@ class FibrePriorModel(ReflectanceModel):
         model = cls(prior, residual, channels=m.channels, kes=kes, support=measured_support(m.subset(rows)),
                     parameters={"residual": residual is not None, "prior": prior.report.get("chosen"),
                                 "theta_d_law": f"Fresnel eta={1.5} normalised at 45 deg"
-                                + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else ""),
+                                + (" x exp(d1 x + d2 x^2)" if prior.spec.free_theta_d else "")
+                                + (" with x = wi.wr held to [{:.3f}, {:.3f}]".format(*prior.spec.theta_d_range)
+                                   if prior.spec.free_theta_d and prior.spec.theta_d_range else ""),
                                 "energy": f"albedo-scaled, bound {ENERGY_BOUND}"},
                     diagnostics={"fit": prior.report, "residual": note, "kes_candidate": kes_note},
                     input_info=m.input_info())

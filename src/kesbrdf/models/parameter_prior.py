@@ -31,13 +31,15 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["ParameterPrior", "learn_prior", "load_prior", "DEFAULT_PRIOR_PATH", "GEOMETRY_SUFFIXES",
+__all__ = ["ParameterPrior", "learn_prior", "load_prior", "as_parameter_prior", "DEFAULT_PRIOR_PATH", "GEOMETRY_SUFFIXES",
            "SHRINK_N0", "MIN_SD_FRACTION", "MIN_FABRICS"]
 
 #: Parameters a prior is learned for: the yarn geometry and the θ_d law (not the colour
 #: terms log_kd_c / log_ks_c, which are the fabric's own, nor the axis offset δ).
 GEOMETRY_SUFFIXES = ("_u_lo", "_u_hi", "_log_s", "_c2", "_rho", "_psi")
 THETA_D_NAMES = ("d1", "d2")
+#: Every name a prior may hold: a yarn family's geometry and the θ_d law.
+KNOWN_NAMES = frozenset(f"{fam}{suffix}" for fam in ("warp", "weft") for suffix in GEOMETRY_SUFFIXES) | set(THETA_D_NAMES)
 #: Pseudo-count of the wide variance the learned one is shrunk toward (eq. M2).
 SHRINK_N0 = 2.0
 #: Floor of s_k as a fraction of the parameter's bound range (eq. M2).
@@ -104,19 +106,40 @@ class ParameterPrior:
 
     @classmethod
     def from_dict(cls, doc: dict, source: str = "") -> "ParameterPrior":
+        """Check and read :meth:`to_dict`'s document; every defect is one ModelError line."""
         from kesbrdf.errors import ModelError
 
+        where = source or "parameter prior"
+        if not isinstance(doc, dict):
+            raise ModelError(f"{where}: expected a JSON object, got {type(doc).__name__}")
         if doc.get("schema") != SCHEMA:
-            raise ModelError(f"{source or 'parameter prior'}: expected schema {SCHEMA!r}, got {doc.get('schema')!r}")
+            raise ModelError(f"{where}: expected schema {SCHEMA!r}, got {str(doc.get('schema'))[:60]!r}")
         pars = doc.get("parameters") or {}
-        mean = {k: float(v["mean"]) for k, v in pars.items()}
-        sd = {k: float(v["sd"]) for k, v in pars.items()}
-        bad = [k for k in mean if not (math.isfinite(mean[k]) and math.isfinite(sd[k]) and sd[k] > 0)]
-        weight = float(doc.get("weight", 1.0))
+        if not isinstance(pars, dict):
+            raise ModelError(f"{where}: expected 'parameters' to be an object, got {type(pars).__name__}")
+        mean, sd, bad = {}, {}, []
+        for k, v in pars.items():
+            try:
+                m, s = float(v["mean"]), float(v["sd"])
+            except (TypeError, KeyError, ValueError):
+                bad.append(str(k)[:40])
+                continue
+            if k not in KNOWN_NAMES:
+                raise ModelError(f"{where}: unknown parameter {str(k)[:40]!r}; expected names of the fibre prior's "
+                                 f"geometry ({', '.join(sorted(KNOWN_NAMES))})")
+            if not (math.isfinite(m) and math.isfinite(s) and s > 0):
+                bad.append(str(k))
+                continue
+            a, b = _range(k)
+            mean[k], sd[k] = m, max(s, MIN_SD_FRACTION * (b - a))  # the floor of learn_prior (eq. M2)
+        try:
+            weight = float(doc.get("weight", 1.0))
+        except (TypeError, ValueError):
+            weight = float("nan")
         if bad or not (math.isfinite(weight) and weight >= 0):
-            raise ModelError(f"{source or 'parameter prior'}: expected finite means, positive sds and weight >= 0, "
+            raise ModelError(f"{where}: expected a finite mean and a positive sd per parameter and a weight >= 0, "
                              f"bad: {', '.join(bad) or 'weight'}")
-        return cls(mean, sd, weight, source, dict(doc.get("meta") or {}))
+        return cls(mean, sd, weight, source, dict(doc.get("meta") or {}) if isinstance(doc.get("meta"), dict) else {})
 
 
 def learn_prior(fits, weight: float = 1.0, source: str = "", theta_d: bool = True) -> ParameterPrior:
@@ -145,7 +168,29 @@ def learn_prior(fits, weight: float = 1.0, source: str = "", theta_d: bool = Tru
 
 
 def load_prior(path="default") -> ParameterPrior:
-    """The prior of a JSON file (:meth:`ParameterPrior.to_dict`); ``"default"`` is the shipped one."""
+    """The prior of a JSON file (:meth:`ParameterPrior.to_dict`); ``"default"`` is the shipped one.
+    A missing or unreadable file is one ModelError line."""
+    from kesbrdf.errors import ModelError
+
     p = DEFAULT_PRIOR_PATH if path == "default" else Path(path)
-    with open(p, encoding="utf-8") as fh:
-        return ParameterPrior.from_dict(json.load(fh), str(p.name if path == "default" else p))
+    name = str(p.name if path == "default" else p)
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ModelError(f"{name}: cannot read the parameter prior: {exc.strerror or exc}") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ModelError(f"{name}: expected a JSON parameter prior, got unreadable JSON ({str(exc)[:80]})") from None
+    return ParameterPrior.from_dict(doc, name)
+
+
+def as_parameter_prior(value):
+    """``value`` as a :class:`ParameterPrior` or None: a prior, ``"default"`` (the shipped one),
+    or the path of a JSON file; anything else is one ModelError line."""
+    from kesbrdf.errors import ModelError
+
+    if value is None or isinstance(value, ParameterPrior):
+        return value
+    if isinstance(value, (str, Path)):
+        return load_prior(value)
+    raise ModelError(f"parameter_prior: expected None, 'default', a JSON file or a ParameterPrior, "
+                     f"got {type(value).__name__}")

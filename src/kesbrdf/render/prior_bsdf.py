@@ -222,7 +222,7 @@ class PriorDrJit:
                 # P(u)·Δu at the fixed nodes: constants of the fitted model, in float64
                 w = P.tilt_profile(P.U_NODES, lo, hi, log_s, c2) * P.DU
                 entry.update(psi=tuple(opaque_float(v) for v in (math.tan(psi), math.sin(psi), math.cos(psi),
-                                                                   1.0 / abs(math.sin(psi)))),
+                                                                   1.0 / max(abs(math.sin(psi)), 1e-6))),
                              nodes=[(math.sin(u), math.cos(u), opaque_float(wu))
                                     for k, (u, wu) in enumerate(zip(P.U_NODES, w)) if _block_has_weight(w, k)])
             self.families.append(entry)
