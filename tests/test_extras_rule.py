@@ -76,9 +76,15 @@ def silk_with_a_second_line():
     return planning.simulate(Irawan2012("silk_charmeuse"), ("paper", "line:30"), noise=0.02, rng=0)
 
 
-def test_extras_leave_the_decision_to_the_incidence_lines_and_the_prior_fits_every_row(silk_with_a_second_line):
+@pytest.fixture(scope="module")
+def silk_fit(silk_with_a_second_line):
+    """The default fit of that measurement (one fit shared by the tests, ~7 CPU-s)."""
+    return fit(silk_with_a_second_line)
+
+
+def test_extras_leave_the_decision_to_the_incidence_lines_and_the_prior_fits_every_row(silk_with_a_second_line, silk_fit):
     m = silk_with_a_second_line
-    model, report = fit(m)
+    model, report = silk_fit
     # before, the comparison refused the extra line and kes was kept on the 116 rows
     assert report.kind == "fibre-prior" and report.rows_used == len(m) == 172
     assert "compared on the 116 incidence-line rows" in report.reason
@@ -88,25 +94,25 @@ def test_extras_leave_the_decision_to_the_incidence_lines_and_the_prior_fits_eve
     assert lo == pytest.approx(x.min()) and hi == pytest.approx(x.max())
 
 
-def test_the_decision_with_extras_is_the_decision_on_the_lines_alone(silk_with_a_second_line):
+def test_the_decision_with_extras_is_the_decision_on_the_lines_alone(silk_with_a_second_line, silk_fit):
     from kesbrdf.fitting import choose_fitter
 
     m = silk_with_a_second_line
     _, lines, _, _, _ = choose_fitter(m)
     assert 0 < np.count_nonzero(lines) < len(m)
-    _, with_extras = fit(m)
+    _, with_extras = silk_fit
     _, on_lines = fit(m.subset(lines))
     assert with_extras.comparison["kept"] == on_lines.comparison["kept"] == "prior+residual"
     assert with_extras.comparison["median_biases"] == on_lines.comparison["median_biases"]
 
 
-def test_a_model_file_keeps_the_range_and_a_hostile_one_is_one_line(silk_with_a_second_line, tmp_path):
+def test_a_model_file_keeps_the_range_and_a_hostile_one_is_one_line(silk_fit, tmp_path):
     import json
 
     from kesbrdf.errors import ModelError
     from kesbrdf.io.model_file import load_model
 
-    model, _ = fit(silk_with_a_second_line)
+    model, _ = silk_fit
     path = tmp_path / "silk.kes.json"
     model.save(path)
     back = load_model(path)
