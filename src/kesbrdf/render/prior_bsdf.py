@@ -215,7 +215,7 @@ class PriorDrJit:
             ks = as_rgb(np.exp([p[f"{fam}_log_ks_{c}"] for c in range(C)]))
             a = alpha + self.offset
             entry = {"kind": kind, "alpha": (opaque_float(math.sin(a)), opaque_float(math.cos(a))),
-                     "ks": ks, "ks_c": opaque_rgb(ks), "rho": _LobeRho(rho),
+                     "ks": opaque_rgb(ks), "rho": _LobeRho(rho),
                      "shape": tuple(opaque_float(v) for v in (lo, hi, 1.0 / math.exp(log_s), c2))}
             if kind == "staple":
                 psi = p[f"{fam}_psi"]
@@ -281,7 +281,7 @@ class PriorDrJit:
         for fam in self.families:
             hf, i, r = family_frame(h, fam["alpha"]), family_frame(wi, fam["alpha"]), family_frame(wr, fam["alpha"])
             S = (self._filament if fam["kind"] == "filament" else self._staple)(fam, hf, i, r, norm_sum)
-            out.append(fam["ks_c"] * (phi_td * S))
+            out.append(fam["ks"] * (phi_td * S))
         return out
 
     def __call__(self, wi, wr):
