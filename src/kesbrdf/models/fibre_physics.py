@@ -58,7 +58,7 @@ import functools
 import math
 import time
 from collections import ChainMap
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.optimize import least_squares
@@ -845,14 +845,9 @@ def _penalty_terms(parameter_prior, spec: PriorSpec, bounds, d: _Data):
     return cols, mu, w
 
 
-#: Whether the multistart's short runs carry the MAP rows too (else only the polish of
-#: each variant's best start does; docs/prior.md §9).
-PENALTY_IN_STARTS = False
-
-
 def _with_prior_theta_d(spec: PriorSpec, x, parameter_prior):
     """(spec, θ) with the θ_d law freed and d₁, d₂ at the prior's means (within their bounds)."""
-    spec2 = PriorSpec(spec.kinds, spec.n_channels, spec.free_axes, True)
+    spec2 = replace(spec, free_theta_d=True)
     idx2 = spec2.index()
     x2 = np.zeros(len(idx2))
     for name, v in zip(spec.names(), x):
@@ -895,8 +890,8 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
     parameter_prior : None or :class:`kesbrdf.models.parameter_prior.ParameterPrior`
         A Gaussian prior over the parameters (MAP fit, eq. M1 of docs/prior.md §9):
         rows √λ (θ_k − μ_k)/s_k are appended to the residuals of the polish of each
-        variant's best start (the multistart itself is the least-squares one, see
-        :data:`PENALTY_IN_STARTS`).  When ``free_theta_d="auto"`` leaves the θ_d law
+        variant's best start (the multistart itself is the least-squares one: with the
+        rows in it the solver found worse optima, docs/prior.md §9).  When ``free_theta_d="auto"`` leaves the θ_d law
         fixed (the data do not span θ_d) and the prior knows d₁, d₂, the law is freed
         with d₁, d₂ at the prior's means (on the paper slice ωi·ωr = 0, the data do
         not depend on them, so this is the MAP).  Variants are compared by the BIC of
@@ -951,8 +946,7 @@ def fit_prior(m, kinds="auto", free_axes="auto", free_theta_d="auto", rows=None,
             bounds = spec.bounds(tuple(np.sign(p) if p else 1 for p in psi))
             if bound_body:
                 bounds = body_bounded(spec, bounds, d)
-            res = _solve(spec, x0, ds, bounds, n_start,
-                         _penalty_terms(parameter_prior, spec, bounds, ds) if PENALTY_IN_STARTS else None)
+            res = _solve(spec, x0, ds, bounds, n_start)  # the multistart is plain least squares (docs/prior.md §9)
             if best is None or res.cost < best[0].cost:
                 best = (res, bounds)
         res, bounds = best
