@@ -56,7 +56,7 @@ def run(progress=None) -> dict:
     fabrics = {}
     for k, (fam, refs) in enumerate(library.items()):
         for j, (name, ref) in enumerate(refs.items()):
-            tests = lofo._test_sets(ref)
+            tests = lofo.scoring_truths(ref)
             row = {}
             for proto, groups in PROTOCOLS.items():
                 m = planning.simulate(ref, groups, noise=NOISE, rng=100 * k + j)

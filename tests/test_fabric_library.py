@@ -86,9 +86,9 @@ def test_stored_measurements_and_truths_are_the_references(built):
             np.testing.assert_array_equal(got.values, want.values)        # bit for bit
             np.testing.assert_array_equal(got.uncertainty, want.uncertainty)
             np.testing.assert_array_equal(got.wi, want.wi)
-        from kesbrdf.validate.lofo import _test_sets
+        from kesbrdf.validate.lofo import scoring_truths
 
-        fresh, stored = _test_sets(ref), lib.truths(k)
+        fresh, stored = scoring_truths(ref), lib.truths(k)
         np.testing.assert_allclose(stored["held"][2], fresh["held"][2], rtol=FLOAT32_RTOL)
         for a, b in zip(stored["hemis"], fresh["hemis"]):
             np.testing.assert_array_equal(a[0], b[0])

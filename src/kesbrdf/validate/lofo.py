@@ -37,18 +37,17 @@ it is kept for an independent held-out check.
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import replace
 
 import numpy as np
 
-from kesbrdf.geometry import spherical_to_cartesian
 from kesbrdf.measure.gonio import measure
-from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions, metrics
-from kesbrdf.validate.library import NOISE as LIBRARY_NOISE
+from kesbrdf.validate.compare import metrics
+from kesbrdf.validate.library import NOISE as LIBRARY_NOISE, truth_sets
+from kesbrdf.validate.library import geometry as library_geometry
 
-__all__ = ["FAMILIES", "NOISE", "PROTOCOLS", "family_library", "family_library_from", "library_inputs", "score",
+__all__ = ["FAMILIES", "NOISE", "PROTOCOLS", "family_library", "family_library_from", "library_inputs", "score", "scoring_truths",
            "fit_and_score", "run_lofo", "choose_lofo", "family_table", "FORBIDDEN_FAMILIES"]
 
 #: Multiplicative noise of the simulated measurements (σ = 2 % of the value), as in
@@ -185,20 +184,19 @@ def library_inputs(library, refs: dict, protocols=PROTOCOLS) -> dict:
     return out
 
 
-def _test_sets(ref) -> dict:
-    held = measure(ref, orientations_deg=HELD_OUT_DEG)
-    wr, _, _ = hemisphere_directions()
-    wr = wr.reshape(-1, 3)
-    hemis = []
-    for ti, pi in HEMISPHERE_LIGHTS_DEG:
-        wi = np.broadcast_to(spherical_to_cartesian(math.radians(ti), math.radians(pi)), wr.shape)
-        hemis.append((wi, wr, np.asarray(ref(wi, wr), float)))
-    return {"held": (held.wi, held.wr, held.values), "hemis": hemis}
+def scoring_truths(ref) -> dict:
+    """The noise-free truths a fabric is scored on (the ``tests`` of :func:`score` and
+    :func:`fit_and_score`): the held-out orientations and both Fig. 6 hemispheres, at the
+    directions the fabric library stores its truths at (:func:`kesbrdf.validate.library.geometry`).
+    Built once per fabric when several fits or protocols are scored against it."""
+    g = library_geometry()
+    return truth_sets({tag: (g[f"{tag}_wi"], g[f"{tag}_wr"], np.asarray(ref(g[f"{tag}_wi"], g[f"{tag}_wr"]), float))
+                       for tag in ("held", "hemi90", "hemi45")})
 
 
 def score(predict, ref, tests=None) -> dict:
     """``{"orientations", "hemispheres", "hemi90", "hemi45"}`` NRMSE of ``predict(wi, wr)`` against ``ref``."""
-    tests = tests or _test_sets(ref)
+    tests = tests or scoring_truths(ref)
     wi, wr, truth = tests["held"]
     out = {"orientations": metrics(predict(wi, wr), truth)["all"]["nrmse"]}
     for (wi, wr, truth), tag in zip(tests["hemis"], ("hemi90", "hemi45")):
@@ -215,7 +213,7 @@ def fit_and_score(ref, fitters: dict, protocol: str = "paper", seed: int = 0, te
     A fitter that raises is recorded as ``{"error": one line}`` (it is a result, not a crash).
     """
     m = measurement if measurement is not None else measure(ref, protocol=protocol, noise=NOISE, rng=seed)
-    tests = tests or _test_sets(ref)
+    tests = tests or scoring_truths(ref)
     out = {}
     for name, fitter in fitters.items():
         c0 = time.process_time()
@@ -260,7 +258,7 @@ def run_lofo(library: dict, fitters: dict, protocols=PROTOCOLS, progress=None, c
             for p, protocol in enumerate(protocols):
                 todo = {n: f for n, f in fitters.items() if f"{fam}/{name}/{protocol}/{n}" not in cache}
                 if todo:
-                    tests = tests or _test_sets(ref)
+                    tests = tests or scoring_truths(ref)
                     rows = fit_and_score(ref, todo, protocol, seed=1000 * k + 10 * j + p, tests=tests,
                                          measurement=given.get(protocol))
                     for n, row in rows.items():
