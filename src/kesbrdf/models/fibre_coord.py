@@ -85,7 +85,7 @@ from kesbrdf.models.base import register, check_fit_options
 from kesbrdf.models.body import log_body_upper
 from kesbrdf.models.fibre_physics import FibrePrior, fit_prior
 from kesbrdf.models.fibre_prior import (ENERGY_BOUND, FibrePriorModel, bound_energy, fit_kes_candidate, fit_residual,
-                                        measured_support)
+                                        measured_support, residual_label)
 
 __all__ = ["CoordPrior", "FibreCoordModel", "fit_coord", "fibre_coordinates", "U_NODES_DEG", "PHI_NODES_DEG",
            "TD_NODES_DEG", "SMOOTH", "PULL", "PULL_THETA_D", "FAMILIES", "BODY_KEEP_RATIO"]
@@ -481,7 +481,8 @@ class FibreCoordModel(FibrePriorModel):
 
     def describe(self) -> str:
         return (f"fibre-coord (fibre-coordinate corrections of the {self.prior.base.report.get('chosen') or 'woven-cloth'} "
-                f"prior{' x KES residual' if self.residual is not None else ''}), channels {', '.join(self.channels)}")
+                f"prior{' x ' + residual_label(self.residual) if self.residual is not None else ''}), "
+                f"channels {', '.join(self.channels)}")
 
     def render_plugin(self, mapping=None, extrapolation=None):
         """The ``kesbrdf_fibre_coord`` plugin (:mod:`kesbrdf.render.fibre_coord_bsdf`: (C1), the
@@ -506,7 +507,8 @@ class FibreCoordModel(FibrePriorModel):
             residual_opt, note = False, "residual off: several incidence lines"
         if residual_opt:
             try:
-                residual, note = fit_residual(prior, sub), "KES residual on the in-plane samples"
+                residual = fit_residual(prior, sub)
+                note = residual_label(residual, long=True)
             except MeasurementError as exc:
                 if residual_opt is True:
                     raise

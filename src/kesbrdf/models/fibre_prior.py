@@ -56,7 +56,7 @@ from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
 from kesbrdf.models.parameter_prior import as_parameter_prior
 from kesbrdf.optics import fresnel_dielectric
 
-__all__ = ["FibrePriorModel", "fit_residual", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "SIGMA_SCALES", "measured_support", "support_distance", "support_distance_parts", "misfit_level", "variance_parts", "off_support_variance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
+__all__ = ["FibrePriorModel", "fit_residual", "residual_label", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "SIGMA_SCALES", "measured_support", "support_distance", "support_distance_parts", "misfit_level", "variance_parts", "off_support_variance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
 #: Width of the relaxation of the residual toward 1 beyond the measured γ range.
 RELAX_DEG = 15.0
@@ -167,7 +167,7 @@ class FibrePriorModel(ReflectanceModel):
     def describe(self) -> str:
         chosen = self.parameters.get("prior")
         return (f"fibre-prior ({chosen or 'woven-cloth prior'}"
-                f"{' x KES residual' if self.residual is not None else ', no residual'}), "
+                f"{' x ' + residual_label(self.residual) if self.residual is not None else ', no residual'}), "
                 f"channels {', '.join(self.channels)}")
 
     def predict_sigma(self, wi, wr):
@@ -302,8 +302,7 @@ class FibrePriorModel(ReflectanceModel):
         if residual_opt:
             try:
                 residual = _fit_residual(prior, m.subset(rows))
-                note = ("(phi_h, theta_h, theta_d) residual over several incidence lines"
-                        if getattr(residual, "mode", "line") == "halfdiff" else "KES residual on the incidence line")
+                note = residual_label(residual, long=True)
             except MeasurementError as exc:
                 if residual_opt is True:
                     raise
@@ -477,6 +476,16 @@ def _fit_residual(prior: FibrePrior, m: Measurement):
     if _incidence_lines(rm) > 1:
         return _halfdiff_table(rm)
     return ratio_table(rm)
+
+
+def residual_label(residual, long: bool = False) -> str:
+    """What :func:`_fit_residual` built: the KES table of the incidence line, or the
+    (φ_h, θ_h, θ_d) table of several lines (``long``: as the model's diagnostics say it)."""
+    several = getattr(residual, "mode", "line") == "halfdiff"
+    if long:
+        return ("(phi_h, theta_h, theta_d) residual over several incidence lines" if several
+                else "KES residual on the incidence line")
+    return "half/difference residual" if several else "KES residual"
 
 
 #: Public names of the fitting steps, for kinds built on this one (``fibre-coord``).
