@@ -77,6 +77,12 @@ def test_eval_and_figure_6_work_on_halfdiff(dense, tmp_path):
     rows = out.read_text().splitlines()
     assert float(rows[1].split(",")[4]) > 0 and float(rows[2].split(",")[4]) == 0.0  # θ_i = 90°: 0
     assert main(["plot", str(model), "--figure", "6", "-o", str(tmp_path / "f6.png")]) == 0
+    # the panel names the model's kind (it said "model (KES, ...)" for every kind)
+    from kesbrdf.io.model_file import load_model
+    from kesbrdf.plotting.figures import figure_6
+
+    titles = [ax.get_title() for ax in figure_6(load_model(model), n=15).axes]
+    assert any(t.startswith("model (kes-halfdiff, ") for t in titles) and not any("KES," in t for t in titles), titles
     # figure 5 reads the (phi, gamma) table: a kes-halfdiff model's tabulated view (issue 19;
     # it used to refuse with "figure 5 supports models of kind 'kes'")
     assert main(["plot", str(model), "--figure", "5", "-o", str(tmp_path / "f5.png")]) == 0

@@ -371,7 +371,7 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
         common = dict(extent=grid["extent"], marks={"mirror": mirror})
         ax = fig.add_subplot(len(rows), n_cols, k * n_cols + 1)
         plot_hemisphere(ax, row["model"], scale=scale, vmax=vmax, vmin=None if scale == "log" else 0.0,
-                        label=f"$f_r$ {label} (1/sr)", title=f"model (KES, {mapping})\n{light_text}",
+                        label=f"$f_r$ {label} (1/sr)", title=f"model ({model.kind}, {mapping})\n{light_text}",
                         projection_label=grid["label"], **common)
         if n_cols == 1:
             continue
