@@ -83,6 +83,13 @@ def test_eval_and_figure_6_work_on_halfdiff(dense, tmp_path):
 
     titles = [ax.get_title() for ax in figure_6(load_model(model), n=15).axes]
     assert any(t.startswith("model (kes-halfdiff, ") for t in titles) and not any("KES," in t for t in titles), titles
+    from kesbrdf.plotting.figures import figure_3a, figure_4
+
+    hd = load_model(model)
+    legend = [t.get_text() for t in figure_3a(hd, mapping=hd.mappings[0]).axes[0].get_legend().get_texts()]
+    assert legend and all(t.endswith("kes-halfdiff model") for t in legend), legend
+    polar = figure_4(hd, mapping=hd.mappings[0]).axes[0]
+    assert [ln.get_label() for ln in polar.lines if ln.get_gid() == "kes"] == ["kes-halfdiff"]
     # figure 5 reads the (phi, gamma) table: a kes-halfdiff model's tabulated view (issue 19;
     # it used to refuse with "figure 5 supports models of kind 'kes'")
     assert main(["plot", str(model), "--figure", "5", "-o", str(tmp_path / "f5.png")]) == 0

@@ -50,6 +50,7 @@ def plot_rho_vs_gamma(
     ylabel: str = Q_LABEL,
     logy: bool = False,
     title: str | None = None,
+    model_label: str = "KES model",
 ):
     """Paper Fig. 3a: ρ against signed γ, one colour per orientation ψ.
 
@@ -68,6 +69,8 @@ def plot_rho_vs_gamma(
         Label of the plotted quantity with its unit.
     logy : bool
         Logarithmic ρ axis.
+    model_label : str
+        Legend name of the model curves (the figures pass the model's kind).
 
     Returns
     -------
@@ -89,7 +92,7 @@ def plot_rho_vs_gamma(
                 _DASHES[p % len(_DASHES)],
                 lw=1.4,
                 color=colour,
-                label=f"ψ = {psi:g}° KES model",
+                label=f"ψ = {psi:g}° {model_label}",
                 gid="model",
             )
     ax.set_xlabel(r"$\gamma = \theta_r - \theta_i$ (°)")
@@ -183,8 +186,9 @@ def plot_polar_rho(
     gamma_deg: float | None = None,
     rlabel: str = Q_LABEL,
     title: str | None = None,
+    model_label: str = "KES",
 ):
-    """Paper Fig. 4: ρ over the azimuth at one γ; KES solid, measured dashed.
+    """Paper Fig. 4: ρ over the azimuth at one γ; the model solid (legend ``model_label``), measured dashed.
 
     Parameters
     ----------
@@ -199,6 +203,8 @@ def plot_polar_rho(
         azimuth (``gid="measured"``).
     gamma_deg : float, optional
         Used in the title.
+    model_label : str
+        Legend name of the model curve (the figures pass the model's kind).
 
     Returns
     -------
@@ -208,7 +214,7 @@ def plot_polar_rho(
         raise ValueError(f"expected an axes with projection='polar', got {getattr(ax, 'name', ax)!r}")
     phi = np.asarray(phi, float)
     rho = np.asarray(rho, float)
-    ax.plot(_close(phi), _close(rho), "-", lw=1.5, color="C0", label="KES", gid="kes")
+    ax.plot(_close(phi), _close(rho), "-", lw=1.5, color="C0", label=model_label, gid="kes")
     if measured_rho is not None:
         mp = np.mod(np.asarray(measured_phi, float), 2 * np.pi)
         mr = np.asarray(measured_rho, float)

@@ -144,6 +144,7 @@ def figure_3a(model=None, measurement=None, reference=None, *, channel=None, map
         model_rho=None if curve is None else curve[1],
         logy=logy,
         title=f"Fig. 3a  q vs γ per orientation ({label})",
+        **({} if model is None else {"model_label": f"{model.kind} model"}),
     )
     return attach_provenance(fig, provenance(model, measurement, figure="3a", channel=label,
                                              mapping=mapping, psi_deg=psi_deg, logy=logy))
@@ -215,7 +216,7 @@ def figure_4(model=None, measurement=None, reference=None, *, gamma_deg=(-60.0, 
         if measured is not None:
             mphi, mrho = measured_at_gamma(measured, g)
         plot_polar_rho(ax, phi, q[k], measured_phi=mphi, measured_rho=mrho, gamma_deg=g,
-                       title=rf"Fig. 4  $\gamma$ = {g:g}° ({label})")
+                       title=rf"Fig. 4  $\gamma$ = {g:g}° ({label})", model_label=model.kind)
     return attach_provenance(fig, provenance(model, measurement, figure="4", channel=label,
                                              mapping=mapping, gamma_deg=gamma_deg))
 
