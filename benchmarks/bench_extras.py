@@ -3,7 +3,8 @@
 Issue 20 asks for the leave-one-family-out table per protocol: paper, dense, and paper
 plus planned extras.  The extras are ``kesbrdf plan``'s sample groups
 (:mod:`kesbrdf.measure.planning`): a second incidence line at θ_i = 30° or 60° (56
-samples each) and out-of-plane pairs at θ = 30° and 60° (8).  Every fabric of
+samples each), out-of-plane pairs at θ = 30° and 60° (8) and mirror samples at θ = 18, 36,
+60, 72° (16).  Every fabric of
 :func:`kesbrdf.validate.lofo.family_library` (three per family: Irawan, Sadeghi, Ward,
 Ashikhmin–Shirley) is simulated with each protocol at 2 % noise (one seed per fabric,
 so every protocol shares the paper rows' noise draws), fitted by ``kesbrdf.fit``'s default
@@ -38,7 +39,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 #: The protocols compared: kesbrdf plan's groups.
 PROTOCOLS = {"paper": ("paper",), "paper+line30": ("paper", "line:30"), "paper+line60": ("paper", "line:60"),
-             "paper+oop": ("paper", "oop:30", "oop:60")}
+             "paper+oop": ("paper", "oop:30", "oop:60"),
+             "paper+specular": ("paper", "specular:18", "specular:36", "specular:60", "specular:72")}
 FAMILIES = ("irawan2012", "sadeghi2013", "ward", "ashikhmin_shirley")
 DRAWS = 3
 NOISE = 0.02
@@ -63,8 +65,10 @@ def run(progress=None) -> dict:
                 c0 = time.process_time()
                 model, report = fit(m)
                 s = lofo.score(model.evaluate, ref, tests)
+                extras = (report.comparison or {}).get("extras") or {}
                 row[proto] = {"orientations": s["orientations"], "hemispheres": s["hemispheres"],
                               "kind": model.kind, "rows_used": report.rows_used, "rows": len(m),
+                              "extras_used": extras.get("used"), "extras_log_sse": extras.get("log_sse"),
                               "fit_cpu_s": time.process_time() - c0}
             fabrics[f"{fam}/{name}"] = row
             if progress:

@@ -135,14 +135,19 @@ def _truths():
     return {"demo black satin": embedded_reference(), "ward 0.12/0.30": AnisotropicWard(0.12, 0.3)}
 
 
-def _scores(truth_name, protocols):
+def _scores(truth_name, protocols, fit=planning.default_fit):
     t = planning._Truth(truth_name, _truths()[truth_name], TEST_LIGHTS_DEG, planning.PLAN_GRID_STEP_DEG)
-    return {p: planning.expected_error([t], planning.PROTOCOLS[p]) for p in protocols}
+    return {p: planning.expected_error([t], planning.PROTOCOLS[p], fit=fit) for p in protocols}
 
 
-@pytest.mark.parametrize("truth", ["demo black satin", "ward 0.12/0.30"])
+@pytest.mark.parametrize("truth", [pytest.param("demo black satin", marks=pytest.mark.slow), "ward 0.12/0.30"])
 def test_every_superset_of_the_paper_protocol_scores_no_worse(truth):
-    """The default fit never predicts the hemispheres worse from more samples (docs/planning.md)."""
+    """The default fit never predicts the hemispheres worse from more samples (docs/planning.md).
+
+    The planner fits as ``kesbrdf fit`` does, comparison included: on the demo satin the
+    prior is kept, and its extras check (``fitting._extras_check``) turns down the mirror
+    samples and the incidence lines that would make it worse (measured before the check:
+    + specular 1.49 against 0.89).  Slow there: each superset costs ten prior fits."""
     scores = _scores(truth, ("paper",) + SUPERSETS)
     paper = scores["paper"]["median"]
     for name in SUPERSETS:
@@ -156,6 +161,8 @@ def test_the_superset_check_fails_under_the_old_rule(truth, monkeypatch):
     from kesbrdf import fitting
 
     monkeypatch.setattr(fitting, "SUBSET_RULE", False)
-    scores = _scores(truth, ("paper", "paper+specular"))
+    # without the comparison: the subset rule alone is under test (the prior's dense rule
+    # would otherwise run on the all-rows kes-halfdiff choice)
+    scores = _scores(truth, ("paper", "paper+specular"), fit=lambda m: fitting.fit(m, compare=False)[0])
     assert scores["paper+specular"]["kinds"] == ["kes-halfdiff"]
     assert scores["paper+specular"]["median"] > scores["paper"]["median"] * (1 + SUPERSET_TOL)

@@ -1,8 +1,9 @@
 """The demo's prior part (issue 9): default vs baselines, the fibre-prior model, a small plan.
 
 Kept out of ``cli/demo.py`` so the shared demo stays a list of steps.  Everything here
-costs a few seconds: the prior fits take ~1 s each on 116 samples, the plan fits
-``kesbrdf.fit(compare=False)`` for three protocols and one greedy step.
+costs a few seconds: the prior fits take ~1 s each on 116 samples, the plan fits with
+``kesbrdf.fit``'s default rule (its comparison made once, on the paper's rows) for three
+protocols and one greedy step.
 """
 
 from __future__ import annotations
@@ -64,13 +65,12 @@ def headline(table, model, report) -> str:
 
 def small_plan(reference, say) -> dict:
     """:func:`kesbrdf.measure.planning.plan` for the demo's reference on three protocols."""
-    import kesbrdf
     from kesbrdf.measure.planning import PROTOCOLS, plan
 
     say("plan: expected hemisphere error of the paper protocol and two extensions")
     result = plan({"black satin": reference}, budget=200,
                   protocols={k: PROTOCOLS[k] for k in DEMO_PLAN_PROTOCOLS},
-                  candidates=DEMO_PLAN_CANDIDATES, fit=lambda mm: kesbrdf.fit(mm, compare=False)[0],
+                  candidates=DEMO_PLAN_CANDIDATES,
                   lights_deg=DEMO_PLAN_LIGHTS_DEG)
     d = result.to_dict()
     scored = {k: p for k, p in d["protocols"].items() if not p.get("over_budget")}

@@ -178,20 +178,20 @@ def simulate(truth, groups, noise: float = 0.0, rng=None) -> Measurement:
 
 
 def default_fit(m: Measurement):
-    """:func:`kesbrdf.fit` with ``kind="auto"``: the kind that uses every row it can use well
-    (the subset rule of :func:`kesbrdf.fitting.choose_fitter`).
+    """:func:`kesbrdf.fit` as ``kesbrdf fit`` runs it: the row-based choice (the subset rule of
+    :func:`kesbrdf.fitting.choose_fitter`) and its comparison with the woven-cloth prior.
 
-    Without the held-out comparison with the prior (``compare=False``): the planner fits
-    every candidate protocol many times, and a comparison costs four prior fits (the
-    leave-one-orientation-out of :func:`kesbrdf.validate.selection.loo_compare`, ~10 s of CPU on
-    116 samples) plus the kept one, against ~0.1 s for a KES fit; it would make
-    ``kesbrdf plan`` tens of times slower, not the 2× allowed (docs/decisions.md).  The
-    mirror test and the interpolation baseline alone are cheap, but without the prior's
-    LOO they decide nothing.
+    The plan scores the model a user gets.  The comparison is made on the protocol's
+    incidence lines alone (the extras rule, docs/models.md "Extras and the prior"), and
+    every protocol of a plan shares the paper's rows and their noise draws, so
+    :func:`kesbrdf.fit` makes it once per truth and reuses it for every other protocol
+    (``kesbrdf.fitting._COMPARISONS``); a protocol then costs one fit of the kept kind
+    (~0.1 s for ``kes``, 1–3 s for the prior).  Before, the planner fitted with
+    ``compare=False`` for speed and scored ``kes`` where the default keeps the prior.
     """
     from kesbrdf.fitting import fit
 
-    model, _report = fit(m, compare=False)
+    model, _report = fit(m)
     return model
 
 
