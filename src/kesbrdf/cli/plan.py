@@ -20,8 +20,8 @@ def add_arguments(p):
     p.add_argument("--budget", type=int, default=240, help="largest number of samples (default 240)")
     p.add_argument("--noise", type=float, default=0.0, help="relative measurement noise (std / value)")
     p.add_argument("--kind", default="auto",
-                   help="model kind each protocol is fitted with: auto (kesbrdf fit --no-compare, the "
-                        "default) or a kind such as fibre-prior (slower: ~2-7 s a fit)")
+                   help="model kind each protocol is fitted with: auto (the default: kesbrdf fit's rule, "
+                        "comparison with the prior included) or a kind such as fibre-prior (~2-7 s a fit)")
     p.add_argument("-o", "--output", required=True, help="plan as JSON")
     p.add_argument("--plot", help="also draw the plan (.png, .svg or .pdf)")
 
