@@ -194,8 +194,16 @@ def test_rescaled_sigma_leaves_the_bands(factor, family_cases):
         assert not within_bands(c1, c2, tol=FAMILY_BAND_TOL), (fam, factor, c1, c2)
 
 
-def test_frozen_scales_are_the_calibrated_ones():
+def test_frozen_scales_are_the_calibrated_ones(ward_file):
     """KES_SIGMA_SCALES are the grid point bench_calibrate_sigma.py chose on all five
-    families (2026-12-03); a change must come with a new calibration run."""
+    families (2026-12-03; a change must come with a new calibration run), and each scale
+    acts on its own term: a larger azimuth scale widens σ between orientations only, a
+    larger slice scale off the slice only."""
     assert KES_SIGMA_SCALES == {"azimuth": 1.0, "azimuth_power": 1.0, "slice": 0.3, "slice_misfit": 3.0}
-    assert predict_kes_sigma is not None
+    model, _ = ward_file
+    wi, wr = _pairs()
+    base = predict_kes_sigma(model, wi, wr)[2][:, 0]
+    wide_az = predict_kes_sigma(model, wi, wr, {"azimuth": 2.0})[2][:, 0]
+    wide_sl = predict_kes_sigma(model, wi, wr, {"slice": 0.6})[2][:, 0]
+    assert wide_az[1] > base[1] and np.allclose(wide_az[[0, 2]], base[[0, 2]])
+    assert np.all(wide_sl[3:] > base[3:]) and np.allclose(wide_sl[:3], base[:3])
