@@ -168,6 +168,10 @@ def prior_files(tmp_path_factory):
     write_measurement(d / "meas.csv", m)
     assert main(["fit", str(d / "meas.csv"), "--kind", "fibre-prior", "-o", str(d / "m.kes.json")]) == 0
     assert main(["fit", str(d / "meas.csv"), "--kind", "kes", "-o", str(d / "k.kes.json")]) == 0
+    # a kes file as written before the σ summary (no "sigma" field): it refuses σ
+    doc = json.loads((d / "k.kes.json").read_text())
+    del doc["sigma"]
+    (d / "k_old.kes.json").write_text(json.dumps(doc))
     pairs = d / "pairs.csv"
     pairs.write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg\n30,90,30,270\n60,180,30,0\n30,45,85,200\n89,10,89,190\n")
     return d, m
@@ -198,9 +202,11 @@ def test_eval_uncertainty_columns(prior_files, tmp_path):
     np.testing.assert_allclose(f, g, rtol=CSV_RTOL)
 
 
-def test_eval_uncertainty_on_kes_is_a_one_line_error(prior_files, tmp_path, capsys):
+def test_eval_uncertainty_on_old_kes_file_is_a_one_line_error(prior_files, tmp_path, capsys):
+    """A kes file without the σ summary (written before it) loads and refuses σ in one line."""
     d, _ = prior_files
-    rc = main(["eval", str(d / "k.kes.json"), "--pairs", str(d / "pairs.csv"), "-o", str(tmp_path / "o.csv"), "--uncertainty"])
+    rc = main(["eval", str(d / "k_old.kes.json"), "--pairs", str(d / "pairs.csv"), "-o", str(tmp_path / "o.csv"),
+               "--uncertainty"])
     assert rc == 2
     err = capsys.readouterr().err.strip()
     assert "carries no uncertainty" in err and "fibre-prior" in err and len(err.splitlines()) == 1
@@ -208,7 +214,10 @@ def test_eval_uncertainty_on_kes_is_a_one_line_error(prior_files, tmp_path, caps
     with pytest.raises(ModelError):
         from kesbrdf.io.model_file import load_model as load
 
-        predict_sigma(load(d / "k.kes.json"), np.array([[0, 0, 1.0]]), np.array([[0, 0, 1.0]]))
+        predict_sigma(load(d / "k_old.kes.json"), np.array([[0, 0, 1.0]]), np.array([[0, 0, 1.0]]))
+    # the kes file written now carries its σ (eq. K1 of kesbrdf.models.kes_sigma)
+    assert main(["eval", str(d / "k.kes.json"), "--pairs", str(d / "pairs.csv"), "-o", str(tmp_path / "k.csv"),
+                 "--uncertainty"]) == 0
 
 
 def test_validate_reports_coverage(prior_files, tmp_path, capsys):
@@ -222,8 +231,10 @@ def test_validate_reports_coverage(prior_files, tmp_path, capsys):
     # the fit saw separates them), so nearly all lie within 2σ
     assert res["within_2sigma"] >= TRAIN_MIN_2SIGMA
     assert 0 <= res["within_1sigma"] <= res["within_2sigma"] <= 1
-    assert main(["validate", str(d / "k.kes.json"), str(d / "meas.csv")]) == 0
+    assert main(["validate", str(d / "k_old.kes.json"), str(d / "meas.csv")]) == 0
     assert "carries no sigma" in capsys.readouterr().out
+    assert main(["validate", str(d / "k.kes.json"), str(d / "meas.csv")]) == 0
+    assert "within 1 sigma" in capsys.readouterr().out
 
 
 def test_bad_support_is_one_error_naming_the_file_once(fitted, tmp_path):

@@ -436,7 +436,9 @@ def run(args) -> int:
         from kesbrdf.pipeline import outputs
 
         say("figures + report")
-        prior_model = fitted.model if fitted.model.has_sigma else prior_part.get("prior_model")
+        # the prior-based model's σ map: the chosen model's own when it is prior-based, else
+        # the prior fitted beside it (a kes model now carries a σ too, drawn as the model's)
+        prior_model = fitted.model if hasattr(fitted.model, "prior") else prior_part.get("prior_model")
         inputs = outputs.report_inputs(
             fitted, m, validated, reference,
             metrics=summary,

@@ -55,6 +55,8 @@ from kesbrdf.models.table import lookup
 from kesbrdf.models.fibre_physics import THETA_D_ETA, FibrePrior, fit_prior
 from kesbrdf.models.parameter_prior import as_parameter_prior
 from kesbrdf.optics import fresnel_dielectric
+from kesbrdf.models.support import (MAX_SIGMA_LOG, measured_support, support_distance,  # noqa: F401  (re-exported)
+                                    support_distance_parts, theta_d as _theta_d)
 
 __all__ = ["FibrePriorModel", "fit_residual", "residual_label", "bound_energy", "fit_kes_candidate", "RELAX_DEG", "ENERGY_BOUND", "energy_scale", "energy_scale_table", "OFF_SUPPORT_SCALE", "SIGMA_SCALES", "measured_support", "support_distance", "support_distance_parts", "misfit_level", "variance_parts", "off_support_variance", "ratio_measurement", "ratio_table", "predict_with_uncertainty", "calibration"]
 
@@ -392,41 +394,6 @@ def _fit_kes_candidate(m: Measurement):
         return None, f"no KES candidate for sigma: {exc}"
 
 
-def _theta_d(wi, wr):
-    """θ_d, half the angle between ω_i and ω_r (radians)."""
-    c = np.clip(np.sum(wi * wr, axis=-1), -1.0, 1.0)
-    return 0.5 * np.arccos(c)
-
-
-def measured_support(m: Measurement) -> dict:
-    """Where ``m`` holds data: its θ_d range, largest deviation γ and light azimuths ψ
-    (the orientations, mod 180°), all in degrees."""
-    td = np.degrees(_theta_d(m.wi, m.wr))
-    _, gamma = to_phi_gamma(m.wi, m.wr, "deviation")
-    psi = np.unique(np.round(np.degrees(np.arctan2(m.wi[:, 1], m.wi[:, 0])) % 180.0, 6))
-    return {"theta_d_deg": [float(np.min(td)), float(np.max(td))], "gamma_max_deg": float(np.degrees(np.max(gamma))),
-            "psi_deg": [float(v) for v in psi]}
-
-
-def support_distance(support: dict, wi, wr) -> np.ndarray:
-    r"""Distance (radians) of direction pairs from the measured support, eq. (U2):
-
-    .. math::
-
-        d^2 = \operatorname{dist}(\theta_d, [\theta_d^-, \theta_d^+])^2
-            + \max(0, \gamma - \gamma_\max)^2
-            + \bigl(\sin\theta_i \min_k |\phi_i - \psi_k|_{180°}\bigr)^2
-
-    θ_d outside the measured θ_d range, γ beyond the largest measured deviation, and the
-    light's azimuth from the nearest measured orientation ψ_k (mod 180°, as arc length:
-    the azimuth does not matter at normal incidence).  A support without ``psi_deg``
-    (written before it was stored) has no azimuth term.  The two parts separately:
-    :func:`support_distance_parts`.
-    """
-    d_slice, d_psi = support_distance_parts(support, wi, wr)
-    return np.hypot(d_slice, d_psi)
-
-
 def ratio_measurement(prior: FibrePrior, m: Measurement) -> Measurement:
     """In-plane rows of ``m`` with values y / f_prior (y floored at ε = RATIO_FLOOR·max y)."""
     if not np.any(m.is_in_plane):
@@ -492,10 +459,6 @@ def residual_label(residual, long: bool = False) -> str:
 fit_residual = _fit_residual
 bound_energy = _bound_energy
 fit_kes_candidate = _fit_kes_candidate
-
-
-#: Largest σ of ln f reported (a factor e³ ≈ 20): beyond it the number means "unknown".
-MAX_SIGMA_LOG = 3.0
 
 
 #: Scale c of the earlier one-constant off-support term σ_off = c·d (eq. U2, σ of ln f
@@ -628,25 +591,6 @@ def variance_parts(model: FibrePriorModel, wi, wr, f, others=()) -> dict:
         spec_frac = np.clip((fp - kd) / np.maximum(fp, 1e-300), 0.0, 1.0)
         law = (spec_frac * log_phi[:, None]) ** 2
     return {"fit": fit, "spread": spread, "theta_d_law": law}
-
-
-def support_distance_parts(support: dict, wi, wr):
-    """(d_slice, d_ψ) of eq. (U2), radians: the distance off the measured slice (θ_d
-    outside its range, γ beyond the largest deviation) and sin θ_i times the light's
-    azimuth gap to the nearest measured orientation (0 without ``psi_deg``)."""
-    wi, wr = np.broadcast_arrays(np.asarray(wi, float), np.asarray(wr, float))
-    lo, hi = np.radians(support["theta_d_deg"])
-    td = _theta_d(wi, wr)
-    _, gamma = to_phi_gamma(wi, wr, "deviation")
-    d_td = np.maximum(lo - td, 0.0) + np.maximum(td - hi, 0.0)
-    d_g = np.maximum(gamma - math.radians(support["gamma_max_deg"]), 0.0)
-    d_psi = np.zeros_like(td)
-    psi = np.radians(np.asarray(support.get("psi_deg", []), float))
-    if psi.size:
-        phi_i = np.arctan2(wi[..., 1], wi[..., 0])
-        gap = np.abs((phi_i[..., None] - psi + np.pi / 2) % np.pi - np.pi / 2).min(axis=-1)
-        d_psi = np.sqrt(np.clip(1.0 - wi[..., 2] ** 2, 0.0, 1.0)) * gap
-    return np.sqrt(d_td**2 + d_g**2), d_psi
 
 
 def misfit_level(model: FibrePriorModel) -> float:

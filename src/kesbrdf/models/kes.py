@@ -122,6 +122,8 @@ class Model(ReflectanceModel):
         Lambertian body c, 1/sr.
     gamma_nodes, q_nodes : ndarray
         The measured half-sample nodes (for plots and the viewer).
+    sigma : dict or None
+        The numbers of its per-prediction σ (:mod:`kesbrdf.models.kes_sigma`, eq. K1).
     """
 
     kind: ClassVar[str] = "kes"
@@ -145,6 +147,9 @@ class Model(ReflectanceModel):
     diagnostics: dict = field(default_factory=dict)
     input_info: dict = field(default_factory=dict)
     kesbrdf_version: str = __version__
+    #: What the fit's own data say about the table's error (:func:`kesbrdf.models.kes_sigma.sigma_summary`):
+    #: the σ of eq. (K1); None for files written before it, baselines and tabulated tables.
+    sigma: dict | None = None
 
     @property
     def gamma_max(self) -> float:
@@ -235,6 +240,20 @@ class Model(ReflectanceModel):
     def has_table(self) -> bool:
         return True
 
+    @property
+    def has_sigma(self) -> bool:
+        """True when the file holds the σ summary (:mod:`kesbrdf.models.kes_sigma`)."""
+        return self.sigma is not None
+
+    def predict_sigma(self, wi, wr):
+        """``(f, σ, σ_ln f)`` of eq. (K1) (:func:`kesbrdf.models.kes_sigma.predict_kes_sigma`), or
+        None without the σ summary."""
+        if self.sigma is None:
+            return None
+        from kesbrdf.models.kes_sigma import predict_kes_sigma
+
+        return predict_kes_sigma(self, wi, wr)
+
     def table_view(self, n_phi=None, n_gamma=None) -> "Model":
         """The model itself: its table is the (φ, γ) table."""
         return self
@@ -268,7 +287,8 @@ class Model(ReflectanceModel):
 
     # -- model file (kinds contract) -------------------------------------------
     def to_payload(self):
-        return {}, {name: getattr(self, name) for name in _ARRAYS}
+        fields = {} if self.sigma is None else {"sigma": self.sigma}
+        return fields, {name: getattr(self, name) for name in _ARRAYS}
 
     @classmethod
     def from_payload(cls, fields: dict, arrays: dict, shared: dict, source=None) -> "Model":
@@ -313,13 +333,26 @@ class Model(ReflectanceModel):
             )
         if np.any(np.isinf(q_nodes)):
             raise ModelError(f"{where(source)}q_nodes: expected finite values or NaN (unmeasured), got inf")
-        return cls(**shared, **arr)
+        sigma = None
+        if fields.get("sigma") is not None:  # absent in files written before it: no σ
+            from kesbrdf.models.kes_sigma import check_summary
+
+            sigma = check_summary(fields["sigma"], source)
+        return cls(**shared, **arr, sigma=sigma)
 
     # -- fitting (kinds contract) ----------------------------------------------
     @classmethod
     def fit_measurement(cls, measurement, **options) -> "Model":
         check_fit_options(cls.kind, cls.fit_options, options)
-        return fit(measurement, **options)
+        model = fit(measurement, **options)
+        if model.parameters.get("interpolation") == "kes":  # the σ is calibrated for the KES form only
+            from kesbrdf.models.kes_sigma import sigma_summary
+
+            try:
+                model.sigma = sigma_summary(measurement, model)
+            except KesbrdfError:  # e.g. a line with a repeated theta_i: no σ rather than no model
+                model.sigma = None
+        return model
 
     @classmethod
     def usable_rows(cls, measurement, orientations=None):

@@ -17,9 +17,10 @@ import numpy as np
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.fibre_physics import fit_prior
 from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio_table
+from kesbrdf.models.lines import line as _line, on_theta_i as _on, orientation_interpolation_predictions, relative_noise  # noqa: F401
 from kesbrdf.validate.compare import leave_one_orientation_out, mirror_135_to_45
 
-__all__ = ["loo_compare", "choose", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "MIRROR_Z", "INTERPOLATION"]
+__all__ = ["loo_compare", "choose", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "orientation_interpolation_predictions", "relative_noise", "MIRROR_Z", "INTERPOLATION"]
 
 
 def _nrmse(pred, truth):
@@ -209,56 +210,11 @@ MIRROR_Z = 2.0
 
 # -- evidence the bias comparison cannot give: the mirror test and a KES-free baseline ----
 
-def _line(m, psi_deg: float):
-    """(θ_i°, values, θ_r°, σ or None) of the in-plane rows at ``psi_deg``, sorted by θ_i; or None."""
-    psi = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
-    rows = np.abs(psi - psi_deg) < 0.5
-    if np.count_nonzero(rows) < 3:
-        return None
-    ti = np.degrees(m.theta_i[rows])
-    sums = ti + np.degrees(m.theta_r[rows])
-    if np.ptp(sums) > 0.5 or np.unique(np.round(ti, 6)).size != ti.size:
-        # interpolation along θ_i below needs one incidence line θ_i + θ_r = const (the
-        # paper's protocol); several lines would mix into a meaningless curve
-        from kesbrdf.errors import MeasurementError
-
-        raise MeasurementError(
-            f"{m.source or 'measurement'}: psi = {psi_deg:g} deg: expected one incidence line (theta_i + theta_r "
-            f"constant, each theta_i once), got theta_i + theta_r from {sums.min():.1f} to {sums.max():.1f} deg "
-            f"over {ti.size} rows")
-    order = np.argsort(ti)
-    sigma = None if m.uncertainty is None else np.asarray(m.uncertainty, float)[rows][order]
-    return ti[order], m.values[rows][order], np.degrees(m.theta_r[rows])[order], sigma
-
-
-def _on(theta_i, values, at):
-    """``values`` (N, C) interpolated per channel at θ_i = ``at``; NaN outside the range."""
-    return np.stack([np.interp(at, theta_i, values[:, c], left=np.nan, right=np.nan)
-                     for c in range(values.shape[1])], axis=-1)
-
-
 def _nrmse_finite(pred, truth) -> float:
     ok = np.all(np.isfinite(pred), axis=-1) & np.all(np.isfinite(truth), axis=-1)
     if np.count_nonzero(ok) < 2:
         return float("nan")
     return _nrmse(pred[ok], truth[ok])
-
-
-def _relative_noise(line) -> np.ndarray:
-    """σ/|y| of a line: its own uncertainty, else a robust estimate from its roughness.
-
-    Without an uncertainty column, the noise of ln y is estimated from the second
-    differences along θ_i: for white noise of σ, Δ²(ln y) has σ√6, and 1.4826 × the
-    median |Δ²| is σ√6 robustly.  A sharp highlight makes it larger than the noise
-    (the satins: 0.08 with no noise at all), which only makes the mirror test below
-    more willing to call the biases alike.
-    """
-    ti, v, _, sigma = line
-    if sigma is not None:
-        return np.abs(sigma) / np.maximum(np.abs(v), 1e-300)
-    logv = np.log(np.maximum(v, 1e-12 * np.max(np.abs(v)) + 1e-300))
-    d2 = logv[2:] - 2 * logv[1:-1] + logv[:-2]
-    return np.full(v.shape, 1.4826 * float(np.median(np.abs(d2))) / np.sqrt(6.0))
 
 
 def mirror_test(measurement) -> dict:
@@ -270,7 +226,7 @@ def mirror_test(measurement) -> dict:
 
     * ``nrmse`` is the NRMSE between the 45° line and the mirrored 135° line;
     * ``noise`` is what the noise alone would give, √(mean(σ₄₅² + σ₁₃₅²)) / mean|y₄₅|,
-      with σ from the measurement's uncertainty (:func:`_relative_noise` without one);
+      with σ from the measurement's uncertainty (:func:`relative_noise` without one);
     * ``z = nrmse / noise``; ``symmetric`` is ``z ≤`` :data:`MIRROR_Z`.
 
     When the fabric is symmetric in y the two biases are the same data twice, and a
@@ -280,7 +236,7 @@ def mirror_test(measurement) -> dict:
     a, b = _line(measurement, 45.0), _line(measurement, 135.0)
     if a is None or b is None:
         return {"symmetric": None}
-    ra, rb = _relative_noise(a), _relative_noise(b)
+    ra, rb = relative_noise(a), relative_noise(b)
     # mirrored 135° samples: θ_i' = θ_r, ascending
     back = np.argsort(b[2])  # θ_r ascending (on one line it is θ_i descending)
     tb, vb, sb = b[2][back], b[1][back], (rb * np.abs(b[1]))[back]
@@ -300,20 +256,14 @@ def orientation_interpolation_loo(measurement) -> dict:
 
     Each measured orientation ψ ∈ {0, 45, 90, 135}° is predicted, at its own θ_i, as
     the mean of its two neighbours ψ ± 45° (ψ is 180°-periodic: 0° lies between 135° and
-    45°).  It is the KES-free baseline of a held-out orientation 45° from the measured
-    ones, for all four orientations including warp and weft.
+    45°; :func:`orientation_interpolation_predictions`).  It is the KES-free baseline of a
+    held-out orientation 45° from the measured ones, for all four orientations including
+    warp and weft.
 
     Returns ``{psi_deg: nrmse}`` for the orientations whose neighbours were measured.
     """
-    lines = {p: _line(measurement, p) for p in (0.0, 45.0, 90.0, 135.0)}
-    out = {}
-    for p, line in lines.items():
-        lo, hi = lines[(p - 45.0) % 180.0], lines[(p + 45.0) % 180.0]
-        if line is None or lo is None or hi is None:
-            continue
-        pred = 0.5 * (_on(lo[0], lo[1], line[0]) + _on(hi[0], hi[1], line[0]))
-        out[f"{p:g}"] = _nrmse_finite(pred, line[1])
-    return out
+    return {key: _nrmse_finite(pred, line[1])
+            for key, (line, pred) in orientation_interpolation_predictions(measurement).items()}
 
 
 # -- dense in-plane data: the fibre-coordinate kind against interpolation over ψ -------------

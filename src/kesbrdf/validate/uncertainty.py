@@ -6,11 +6,14 @@ A model says whether it carries a σ (``model.has_sigma``, the capability of
 candidate models whose spread is the model term (the pure prior and the KES table
 fitted to the same samples) and the support of the measured data, from which an
 off-support term grows (:func:`kesbrdf.models.fibre_prior.predict_with_uncertainty`,
-docs/prior.md §5).  A ``kes`` / ``kes-halfdiff`` table interpolates the measured samples
-exactly; the file holds no noise estimate and no second candidate, so any σ computed
-from it alone would be invented.  Asking for one is a :class:`~kesbrdf.errors.ModelError`
-that says so (decision recorded in docs/prior.md, "Uncertainty of other kinds").
-``fibre-coord`` (the dense default) inherits the same σ.
+docs/prior.md §5).  ``fibre-coord`` (the dense default) inherits the same σ.  A ``kes``
+model fitted since 2026-12-03 carries the σ of eq. (K1)
+(:mod:`kesbrdf.models.kes_sigma`): the noise of its data, their own
+leave-one-orientation-out interpolation error over ψ as a function of γ, and the
+measured support, stored in its file (docs/decisions.md, "σ of kes models").  A
+``kes-halfdiff`` table, a baseline (nearest/linear) or a kes file written before has
+no noise estimate and no error estimate, so any σ computed from it alone would be
+invented: asking for one is a :class:`~kesbrdf.errors.ModelError` that says so.
 """
 
 from __future__ import annotations
@@ -33,6 +36,9 @@ def has_uncertainty(model) -> bool:
 
 def predict_sigma(model, wi, wr, source: str = "model"):
     r"""f_r and its σ at direction pairs (``model.predict_sigma``).
+
+    For a ``kes`` model with its σ summary, eq. (K1) of :mod:`kesbrdf.models.kes_sigma`:
+    σ² = n² + (a s(γ)^q d_φ)² + ((b₀ + b₁ s̄) d_slice)².
 
     For the ``fibre-prior`` kind, σ of ln f combines the fit noise propagated through the
     Laplace covariance, the spread between the candidates (the model, its pure prior and
@@ -66,8 +72,9 @@ def predict_sigma(model, wi, wr, source: str = "model"):
     result = model.predict_sigma(wi, wr) if has_uncertainty(model) else None
     if result is None:
         raise ModelError(
-            f"{source}: a {model.kind!r} model carries no uncertainty (fit with --kind fibre-prior for one; "
-            "a KES table interpolates the samples exactly and the file holds no noise estimate)"
+            f"{source}: a {model.kind!r} model carries no uncertainty (refit with --kind kes or --kind fibre-prior "
+            "for one; this file holds no noise or interpolation-error estimate: a KES table written before "
+            "2026-12-03, a kes-halfdiff table or a baseline)"
         )
     return result
 
