@@ -350,7 +350,7 @@ def _compare_with_prior(m, rows=None, parameter_prior=None) -> dict | None:
 
     subset = rows is not None and not np.all(rows)
     try:
-        result = loo_compare(m.subset(rows) if subset else m,
+        result = loo_compare(m.subset(rows) if subset else m, decide=True,
                              **({} if parameter_prior is None else {"parameter_prior": parameter_prior}))
     except KesbrdfError:  # too few orientations to hold one out: nothing to compare
         return None

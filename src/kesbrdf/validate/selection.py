@@ -19,14 +19,14 @@ from kesbrdf.models.fibre_physics import fit_prior
 from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio_table
 from kesbrdf.validate.compare import leave_one_orientation_out, mirror_135_to_45
 
-__all__ = ["loo_compare", "choose", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "MIRROR_Z", "INTERPOLATION"]
+__all__ = ["loo_compare", "choose", "bias_failures", "settled_failures", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "MIRROR_Z", "INTERPOLATION"]
 
 
 def _nrmse(pred, truth):
     return float(np.sqrt(np.mean((pred - truth) ** 2)) / max(float(np.mean(np.abs(truth))), 1e-300))
 
 
-def loo_compare(measurement, **fit_options) -> dict:
+def loo_compare(measurement, decide: bool = False, **fit_options) -> dict:
     """Leave-one-orientation-out NRMSE of ``fibre-prior`` (with and without residual) and ``kes``.
 
     Each measured orientation is predicted from the others.  ``kes`` can predict only a
@@ -44,15 +44,31 @@ def loo_compare(measurement, **fit_options) -> dict:
         (:func:`orientation_interpolation_loo`), "median_all": {"prior", INTERPOLATION:
         median over all four orientations}, "mirror": mirror_test(measurement)}``.
         :func:`choose` turns it into a decision.
+
+    With ``decide=True`` (what ``kesbrdf.fit`` asks for) the biases are held out first,
+    then warp, then weft, and the folds stop as soon as :func:`choose` would keep ``kes``
+    whatever the folds left give (:func:`settled_failures` is not empty): the prior is
+    then not fitted with those orientations held out, their rows are absent from
+    ``orientations``, ``median`` and ``median_all`` have no ``"prior"``, and ``"skipped"``
+    lists them.  The folds it fits are the same fits as without it (each depends on its
+    own rows only), so the decision, the kept model and every number it reports are too.
     """
     m = measurement
     psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
     kes_loo = leave_one_orientation_out(m, fallback="log")
-    table = {}
-    for held in (0.0, 45.0, 90.0, 135.0):
+    interp = orientation_interpolation_loo(m)
+    mirror = mirror_test(m)
+    table, skipped = {}, []
+    for held in (45.0, 135.0, 0.0, 90.0):  # the biases first: with decide=True they may settle it
         test_rows = np.abs(psi_deg - held) < 0.5
         if not test_rows.any():
             continue
+        if decide and held in (0.0, 90.0):
+            pending = [f"{p:g}" for p in (0.0, 90.0) if p >= held and np.any(np.abs(psi_deg - p) < 0.5)]
+            if settled_failures({"orientations": table, "median_biases": _bias_median(table),
+                                 "interpolation": interp, "mirror": mirror, "skipped": pending}):
+                skipped = pending
+                break
         test = m.subset(test_rows)
         train = m.subset(~test_rows & np.isfinite(psi_deg))
         prior = fit_prior(train, **fit_options)
@@ -79,19 +95,29 @@ def loo_compare(measurement, **fit_options) -> dict:
                 pred = prior(test.wi, test.wr) * ratio
             row["prior+residual"] = _nrmse(pred, test.values)
         table[f"{held:g}"] = row
-    cands = ("kes", "prior", "prior+residual")
-    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in cands
-              if any(c in r and k in ("45", "135") for k, r in table.items())}
-    bias_median = {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
-                   for c in cands if any(k in table and c in table[k] for k in ("45", "135"))}
+    table = {k: table[k] for k in ("0", "45", "90", "135") if k in table}  # ψ order, as before
+    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in _CANDIDATES
+              if any(c in r and k in ("45", "135") for k, r in table.items()) and not (skipped and c == "prior")}
+    bias_median = _bias_median(table)
     best = min(bias_median, key=bias_median.get) if bias_median else None
-    interp = orientation_interpolation_loo(m)
     four = {}
     for c, vals in (("prior", [r.get("prior", np.nan) for r in table.values()]), (INTERPOLATION, list(interp.values()))):
         if len(vals) == 4 and np.all(np.isfinite(vals)):
             four[c] = float(np.median(vals))
-    return {"orientations": table, "median": median, "median_biases": bias_median, "best": best,
-            "interpolation": interp, "median_all": four, "mirror": mirror_test(m)}
+    out = {"orientations": table, "median": median, "median_biases": bias_median, "best": best,
+           "interpolation": interp, "median_all": four, "mirror": mirror}
+    if skipped:
+        out["skipped"] = skipped
+    return out
+
+
+_CANDIDATES = ("kes", "prior", "prior+residual")
+
+
+def _bias_median(table) -> dict:
+    """{candidate: median NRMSE over the held-out biases 45° and 135°} of a :func:`loo_compare` table."""
+    return {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
+            for c in _CANDIDATES if any(k in table and c in table[k] for k in ("45", "135"))}
 
 
 #: Name of the KES-free baseline (:func:`orientation_interpolation_loo`) in the tables.
@@ -122,14 +148,38 @@ def choose(result: dict) -> tuple[str, str]:
     """
     med = result.get("median_biases") or {}
     four = result.get("median_all") or {}
-    interp = result.get("interpolation") or {}
+    symmetric = bool((result.get("mirror") or {}).get("symmetric"))
+    mirror_note = "biases are mirror images, so kes's bias error decides nothing; " if symmetric else ""
+    skipped = result.get("skipped")
+    if skipped:  # loo_compare(decide=True) stopped when kes was certain
+        return "kes", (mirror_note + "; ".join(settled_failures(result)) + f" (so the prior was not fitted with "
+                       f"psi = {' and '.join(skipped)} deg held out)")
     if "kes" not in med or "prior+residual" not in med or "prior" not in four or INTERPOLATION not in four:
         return "kes", "the prior could not be scored on all four orientations"
-    symmetric = bool((result.get("mirror") or {}).get("symmetric"))
-    ibias = float(np.median([interp[k] for k in ("45", "135") if k in interp] or [np.nan]))
     fails = []
     if not four["prior"] < four[INTERPOLATION]:
         fails.append("the prior does not beat interpolation over psi on all four orientations")
+    fails += bias_failures(result)
+    if fails:
+        return "kes", mirror_note + "; ".join(fails)
+    beaten = "interpolation over psi" + ("" if symmetric else " and kes")
+    return "prior+residual", mirror_note + f"the prior and prior+residual beat {beaten} where scored"
+
+
+def bias_failures(result: dict) -> list[str]:
+    """The tests of :func:`choose` that prior + residual fails on the held-out biases alone
+    (its second and third bullets), as reasons; empty when it passes them or was not scored.
+
+    They need only the biases' errors, the interpolation baseline and the mirror test,
+    so :func:`loo_compare` (``decide=True``) can stop before fitting warp and weft held out."""
+    med = result.get("median_biases") or {}
+    if "kes" not in med or "prior+residual" not in med:
+        return []
+    interp = result.get("interpolation") or {}
+    mirror = result.get("mirror") or {}
+    symmetric = bool(mirror.get("symmetric"))
+    ibias = float(np.median([interp[k] for k in ("45", "135") if k in interp] or [np.nan]))
+    fails = []
     if not med["prior+residual"] < ibias:
         fails.append("prior+residual does not beat interpolation over psi on the biases")
     if not symmetric and not med["prior+residual"] < med["kes"]:
@@ -138,15 +188,40 @@ def choose(result: dict) -> tuple[str, str]:
         # the held-out bias is the other one in the mirror: prior + residual must then
         # predict it to the noise too (within MIRROR_Z of the noise level, the larger of
         # kes's bias error and the mirror test's noise); a larger miss is a failed fit
-        level = max(float(med["kes"]), float((result.get("mirror") or {}).get("noise") or 0.0))
+        level = max(float(med["kes"]), float(mirror.get("noise") or 0.0))
         if not med["prior+residual"] <= MIRROR_Z * level:
             fails.append(f"prior+residual misses the mirrored bias ({med['prior+residual']:.3f}, more than "
                          f"{MIRROR_Z:g}x the noise level {level:.3f})")
-    mirror_note = "biases are mirror images, so kes's bias error decides nothing; " if symmetric else ""
-    if fails:
-        return "kes", mirror_note + "; ".join(fails)
-    beaten = "interpolation over psi" + ("" if symmetric else " and kes")
-    return "prior+residual", mirror_note + f"the prior and prior+residual beat {beaten} where scored"
+    return fails
+
+
+def settled_failures(result: dict) -> list[str]:
+    """The tests of :func:`choose` that the prior fails whatever the held-out orientations
+    in ``result["skipped"]`` (not fitted yet) would give; empty when none is settled.
+
+    * The all-four test: the median of four NRMSE is non-decreasing in each of them and
+      an NRMSE is ≥ 0, so the median with the unfitted ones set to 0 is a lower bound;
+      when it is not below interpolation's median the test fails (only with all four
+      orientations measured, interpolation scored on all four and the fitted ones finite:
+      otherwise :func:`choose` says the prior could not be scored, and nothing is settled).
+    * :func:`bias_failures`, once both biases are fitted.
+    """
+    table = result.get("orientations") or {}
+    pending = list(result.get("skipped") or [])
+    interp = result.get("interpolation") or {}
+    fails = []
+    fitted = [r.get("prior", np.nan) for r in table.values()]
+    ivals = list(interp.values())
+    if (len(fitted) + len(pending) == 4 and len(ivals) == 4 and np.all(np.isfinite(ivals))
+            and np.all(np.isfinite(fitted))):
+        lower = float(np.median(fitted + [0.0] * len(pending)))
+        if not lower < float(np.median(ivals)):
+            fails.append("the prior does not beat interpolation over psi on all four orientations"
+                         + (f" (its median is at least {lower:.3f}, interpolation's {float(np.median(ivals)):.3f})"
+                            if pending else ""))
+    if all(k in table for k in ("45", "135")):
+        fails += bias_failures(result)
+    return fails
 
 
 #: Folds of :func:`kfold_compare` (the CUReT protocol of docs/prior.md).
