@@ -392,7 +392,7 @@ def _dense_rule(m) -> dict | None:
 
     try:
         fitter_class("fibre-coord")
-        result = dense_orientation_loo(m)
+        result = dense_orientation_loo(m, decide=True)
     except (ImportError, KesbrdfError):
         return None
     if len(result["orientations"]) < 4:

@@ -399,7 +399,7 @@ def _grid_key(m, rows):
             for a, b in zip(np.degrees(m.theta_i[rows]), np.degrees(m.theta_r[rows]))]
 
 
-def dense_orientation_loo(measurement, **fit_options) -> dict:
+def dense_orientation_loo(measurement, decide: bool = False, **fit_options) -> dict:
     """Leave-one-orientation-out NRMSE of ``fibre-coord`` and of interpolation over ψ on dense data.
 
     Each orientation ψ ∈ {0, 45, 90, 135}° is held out in turn.  ``fibre-coord`` (its pure
@@ -413,6 +413,13 @@ def dense_orientation_loo(measurement, **fit_options) -> dict:
     Returns ``{"orientations": {psi: {"fibre-coord": nrmse, INTERPOLATION: nrmse}},
     "median_all": {candidate: median over the four}}``; a candidate that cannot be scored
     on all four is left out of ``median_all``.
+
+    With ``decide=True`` (what ``kesbrdf.fit`` asks for) the ``fibre-coord`` folds stop
+    as soon as :func:`choose_dense` would keep the KES branch whatever the others give:
+    the median of the four with the unfitted ones at 0 (a lower bound, as in
+    :func:`settled_failures`) is not below interpolation's.  The orientations not fitted
+    keep their interpolation entry, ``median_all`` has no ``"fibre-coord"`` and
+    ``"skipped"`` lists them; the folds fitted are the same fits as without it.
     """
     from kesbrdf.models.fibre_coord import fit_coord
 
@@ -420,33 +427,66 @@ def dense_orientation_loo(measurement, **fit_options) -> dict:
     psi = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
     at = {p: np.abs(psi - p) < 0.5 for p in (0.0, 45.0, 90.0, 135.0)}
     table = {}
-    for p, rows in at.items():
+    for p, rows in at.items():  # interpolation over ψ first: no fit, and with decide=True it bounds the folds
         if not rows.any():
             continue
-        train = m.subset(~rows & np.isfinite(psi))
-        test = m.subset(rows)
         row = {}
-        try:
-            # the free-body fit: the body-bounded candidate doubles a fit's time (5 fits
-            # here: 27 -> 50 CPU s for 900 rows) and only helps fibre-coord (satins), so
-            # the test is the stricter one for it
-            model = fit_coord(train, **{"body_candidate": False, **fit_options})
-            row["fibre-coord"] = _nrmse(model(test.wi, test.wr), test.values)
-        except Exception:  # noqa: BLE001  (a failed fit is no evidence for the prior)
-            pass
         lo, hi = at[(p - 45.0) % 180.0], at[(p + 45.0) % 180.0]
         if lo.any() and hi.any():
             a, b = (dict(zip(_grid_key(m, nb), m.values[nb])) for nb in (lo, hi))
             nan = np.full(m.n_channels, np.nan)
             pred = np.array([0.5 * (a[k] + b[k]) if k in a and k in b else nan for k in _grid_key(m, rows)])
-            row[INTERPOLATION] = _nrmse_finite(pred, test.values)
+            row[INTERPOLATION] = _nrmse_finite(pred, m.values[rows])
         table[f"{p:g}"] = row
+    skipped = []
+    for p, rows in at.items():
+        if not rows.any():
+            continue
+        if decide and _dense_settled(table, f"{p:g}"):
+            skipped = [k for k in table if "fibre-coord" not in table[k]]
+            break
+        train = m.subset(~rows & np.isfinite(psi))
+        test = m.subset(rows)
+        try:
+            # the free-body fit: the body-bounded candidate doubles a fit's time (5 fits
+            # here: 27 -> 50 CPU s for 900 rows) and only helps fibre-coord (satins), so
+            # the test is the stricter one for it
+            model = fit_coord(train, **{"body_candidate": False, **fit_options})
+            fc = _nrmse(model(test.wi, test.wr), test.values)
+        except Exception:  # noqa: BLE001  (a failed fit is no evidence for the prior)
+            continue
+        table[f"{p:g}"] = {"fibre-coord": fc, **table[f"{p:g}"]}  # the key order of before
     median = {}
     for c in ("fibre-coord", INTERPOLATION):
         vals = [r.get(c, np.nan) for r in table.values()]
         if len(vals) == 4 and np.all(np.isfinite(vals)):
             median[c] = float(np.median(vals))
-    return {"orientations": table, "median_all": median}
+    out = {"orientations": table, "median_all": median}
+    if skipped:
+        out["skipped"] = skipped
+        out["fibre_coord_median_at_least"] = _dense_lower(table)
+    return out
+
+
+def _dense_lower(table) -> float:
+    """The median of the four ``fibre-coord`` NRMSE with the unfitted ones at 0 (a lower bound)."""
+    fitted = [r["fibre-coord"] for r in table.values() if "fibre-coord" in r]
+    return float(np.median(fitted + [0.0] * (4 - len(fitted))))
+
+
+def _dense_settled(table, nxt) -> bool:
+    """True when the KES branch is certain before fitting orientation ``nxt`` and the rest
+    (:func:`dense_orientation_loo`, ``decide=True``): four orientations with a finite
+    interpolation error each, every fold so far fitted and finite, and the lower bound
+    of fibre-coord's median not below interpolation's median."""
+    keys = list(table)
+    done = keys[:keys.index(nxt)]
+    ivals = [table[k].get(INTERPOLATION, np.nan) for k in keys]
+    if len(keys) != 4 or not done or not np.all(np.isfinite(ivals)):
+        return False
+    if not all(np.isfinite(table[k].get("fibre-coord", np.nan)) for k in done):
+        return False
+    return not _dense_lower(table) < float(np.median(ivals))
 
 
 def choose_dense(result: dict, kes_branch: str = "kes-halfdiff") -> tuple[str, str]:
@@ -456,6 +496,10 @@ def choose_dense(result: dict, kes_branch: str = "kes-halfdiff") -> tuple[str, s
     is below interpolation over ψ's, else ``kes_branch``.
     """
     med = result.get("median_all") or {}
+    if result.get("skipped") and INTERPOLATION in med:  # dense_orientation_loo(decide=True) stopped early
+        return kes_branch, (f"fibre-coord does not predict a held-out orientation better than interpolation over psi "
+                            f"(its median of four is at least {result['fibre_coord_median_at_least']:.3f} >= "
+                            f"{med[INTERPOLATION]:.3f}; psi = {' and '.join(result['skipped'])} deg not fitted)")
     if "fibre-coord" not in med or INTERPOLATION not in med:
         return kes_branch, "fibre-coord could not be scored on all four orientations"
     if med["fibre-coord"] < med[INTERPOLATION]:
