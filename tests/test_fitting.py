@@ -145,7 +145,13 @@ def test_auto_compares_with_the_prior_on_held_out_orientations(ward_auto):
     c = report.comparison
     assert c is not None and {"kes", "prior", "prior+residual"} <= set(c["median_biases"])
     assert c["mirror"]["symmetric"]
-    assert c["median_all"]["prior"] > c["median_all"]["interp(psi)"]
+    # the prior's biases alone settle the all-four test (its median over the four is at
+    # least the median with warp and weft at 0), so kesbrdf.fit does not fit them held out
+    # (loo_compare(decide=True); tests/test_selection.py: the same numbers and kind as the full one)
+    assert c["skipped"] == ["0", "90"] and set(c["orientations"]) == {"45", "135"}
+    lower = float(np.median([c["orientations"][k]["prior"] for k in ("45", "135")] + [0.0, 0.0]))
+    assert lower >= c["median_all"]["interp(psi)"] and "prior" not in c["median_all"]
+    assert f"its median is at least {lower:.3f}" in c["why"]
     assert c["kept"] == "kes" and model.kind == "kes"
     line = report.comparison_summary()
     assert "biases mirror images" in line and "kept kes (" in line and "the prior does not beat interpolation" in line

@@ -120,3 +120,49 @@ def test_choose_refuses_a_prior_that_misses_the_mirrored_bias():
     assert kept == "kes" and "misses the mirrored bias" in why
     # within MIRROR_Z x the noise level it is kept (the demo satin: 0.0025 vs kes 0.0017)
     assert choose(_result(True, 0.1, 0.7, {**bias, "prior+residual": 0.0025, "kes": 0.0017}, interp_bias=0.9))[0] == "prior+residual"
+
+
+def _settled_case(interp_all, skipped=("0", "90"), biases=(1.61, 1.625)):
+    """The demo sample's numbers (prior at the biases 1.61/1.625, kes 0.02) with warp/weft not fitted."""
+    table = {k: {"prior": v, "kes": 0.02, "prior+residual": 0.02} for k, v in zip(("45", "135"), biases)}
+    return {"orientations": table, "median_biases": {"kes": 0.02, "prior": float(np.median(biases)), "prior+residual": 0.02},
+            "interpolation": {k: interp_all for k in ("0", "45", "90", "135")}, "median_all": {INTERPOLATION: interp_all},
+            "mirror": {"symmetric": True, "z": 1.0, "noise": 0.02}, "skipped": list(skipped)}
+
+
+def test_settled_failures_bound_the_median_of_the_four_orientations():
+    """With warp and weft not fitted, the prior's median over the four orientations is at
+    least the median with them at 0 (NRMSE >= 0, the median is monotone): (0 + 1.61)/2."""
+    from kesbrdf.validate.selection import settled_failures
+
+    lower = (0.0 + 1.61) / 2
+    fails = settled_failures(_settled_case(0.66))  # the demo sample's interpolation median
+    assert len(fails) == 1 and "all four orientations" in fails[0] and f"at least {lower:.3f}" in fails[0]
+    kept, why = choose(_settled_case(0.66))
+    assert kept == "kes" and "not fitted with psi = 0 and 90 deg held out" in why
+    # interpolation above the bound: whatever warp and weft give could still win, nothing is settled
+    assert settled_failures(_settled_case(lower + 0.01)) == []
+    # the bound holds for any warp/weft errors (the median is never below it)
+    rng = np.random.default_rng(0)
+    for warp, weft in rng.exponential(1.0, size=(200, 2)):
+        assert np.median([warp, weft, 1.61, 1.625]) >= lower
+    # an orientation not measured, or a non-finite fold: choose() says it could not be scored, not settled here
+    three = _settled_case(0.66, skipped=("0",))
+    assert settled_failures(three) == []
+    assert settled_failures(_settled_case(0.66, biases=(1.61, float("nan")))) == []
+
+
+def test_deciding_loo_compare_fits_fewer_folds_with_the_same_numbers():
+    """kesbrdf.fit's comparison (decide=True) stops once kes is certain; the folds it does
+    fit are the same fits as the full comparison's: every number it reports is equal
+    (exactly), and so is the kept kind (a Ward lobe: kes)."""
+    m = measure(AnisotropicWard(0.1, 0.3, 0.3, 0.05), noise=NOISE, rng=2000)
+    full = loo_compare(m)
+    short = loo_compare(m, decide=True)
+    assert short["skipped"] and "skipped" not in full
+    for k, row in short["orientations"].items():
+        assert row == full["orientations"][k]
+    for key in ("median_biases", "interpolation", "mirror"):
+        assert short[key] == full[key]
+    assert short["median_all"] == {k: v for k, v in full["median_all"].items() if k != "prior"}
+    assert choose(short)[0] == choose(full)[0] == "kes"

@@ -396,7 +396,7 @@ def _compare_with_prior(m, rows=None, parameter_prior=None) -> dict | None:
         result = copy.deepcopy(_COMPARISONS[key])
     else:
         try:
-            result = loo_compare(compared,
+            result = loo_compare(compared, decide=True,
                                  **({} if parameter_prior is None else {"parameter_prior": parameter_prior}))
         except KesbrdfError:  # too few orientations to hold one out: nothing to compare
             return None
@@ -516,7 +516,7 @@ def _dense_rule(m) -> dict | None:
 
     try:
         fitter_class("fibre-coord")
-        result = dense_orientation_loo(m)
+        result = dense_orientation_loo(m, decide=True)
     except (ImportError, KesbrdfError):
         return None
     if len(result["orientations"]) < 4:

@@ -20,14 +20,14 @@ from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio
 from kesbrdf.models.lines import line as _line, on_theta_i as _on, orientation_interpolation_predictions, relative_noise  # noqa: F401
 from kesbrdf.validate.compare import leave_one_orientation_out, mirror_135_to_45
 
-__all__ = ["loo_compare", "choose", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "orientation_interpolation_predictions", "relative_noise", "MIRROR_Z", "INTERPOLATION"]
+__all__ = ["loo_compare", "choose", "bias_failures", "settled_failures", "dense_orientation_loo", "choose_dense", "mirror_test", "orientation_interpolation_loo", "orientation_interpolation_predictions", "relative_noise", "MIRROR_Z", "INTERPOLATION"]
 
 
 def _nrmse(pred, truth):
     return float(np.sqrt(np.mean((pred - truth) ** 2)) / max(float(np.mean(np.abs(truth))), 1e-300))
 
 
-def loo_compare(measurement, **fit_options) -> dict:
+def loo_compare(measurement, decide: bool = False, **fit_options) -> dict:
     """Leave-one-orientation-out NRMSE of ``fibre-prior`` (with and without residual) and ``kes``.
 
     Each measured orientation is predicted from the others.  ``kes`` can predict only a
@@ -45,15 +45,31 @@ def loo_compare(measurement, **fit_options) -> dict:
         (:func:`orientation_interpolation_loo`), "median_all": {"prior", INTERPOLATION:
         median over all four orientations}, "mirror": mirror_test(measurement)}``.
         :func:`choose` turns it into a decision.
+
+    With ``decide=True`` (what ``kesbrdf.fit`` asks for) the biases are held out first,
+    then warp, then weft, and the folds stop as soon as :func:`choose` would keep ``kes``
+    whatever the folds left give (:func:`settled_failures` is not empty): the prior is
+    then not fitted with those orientations held out, their rows are absent from
+    ``orientations``, ``median`` and ``median_all`` have no ``"prior"``, and ``"skipped"``
+    lists them.  The folds it fits are the same fits as without it (each depends on its
+    own rows only), so the decision, the kept model and every number it reports are too.
     """
     m = measurement
     psi_deg = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
     kes_loo = leave_one_orientation_out(m, fallback="log")
-    table = {}
-    for held in (0.0, 45.0, 90.0, 135.0):
+    interp = orientation_interpolation_loo(m)
+    mirror = mirror_test(m)
+    table, skipped = {}, []
+    for held in (45.0, 135.0, 0.0, 90.0):  # the biases first: with decide=True they may settle it
         test_rows = np.abs(psi_deg - held) < 0.5
         if not test_rows.any():
             continue
+        if decide and held in (0.0, 90.0):
+            pending = [f"{p:g}" for p in (0.0, 90.0) if p >= held and np.any(np.abs(psi_deg - p) < 0.5)]
+            if settled_failures({"orientations": table, "median_biases": _bias_median(table),
+                                 "interpolation": interp, "mirror": mirror, "skipped": pending}):
+                skipped = pending
+                break
         test = m.subset(test_rows)
         train = m.subset(~test_rows & np.isfinite(psi_deg))
         prior = fit_prior(train, **fit_options)
@@ -80,19 +96,29 @@ def loo_compare(measurement, **fit_options) -> dict:
                 pred = prior(test.wi, test.wr) * ratio
             row["prior+residual"] = _nrmse(pred, test.values)
         table[f"{held:g}"] = row
-    cands = ("kes", "prior", "prior+residual")
-    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in cands
-              if any(c in r and k in ("45", "135") for k, r in table.items())}
-    bias_median = {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
-                   for c in cands if any(k in table and c in table[k] for k in ("45", "135"))}
+    table = {k: table[k] for k in ("0", "45", "90", "135") if k in table}  # ψ order, as before
+    median = {c: float(np.median([r[c] for r in table.values() if c in r])) for c in _CANDIDATES
+              if any(c in r and k in ("45", "135") for k, r in table.items()) and not (skipped and c == "prior")}
+    bias_median = _bias_median(table)
     best = min(bias_median, key=bias_median.get) if bias_median else None
-    interp = orientation_interpolation_loo(m)
     four = {}
     for c, vals in (("prior", [r.get("prior", np.nan) for r in table.values()]), (INTERPOLATION, list(interp.values()))):
         if len(vals) == 4 and np.all(np.isfinite(vals)):
             four[c] = float(np.median(vals))
-    return {"orientations": table, "median": median, "median_biases": bias_median, "best": best,
-            "interpolation": interp, "median_all": four, "mirror": mirror_test(m)}
+    out = {"orientations": table, "median": median, "median_biases": bias_median, "best": best,
+           "interpolation": interp, "median_all": four, "mirror": mirror}
+    if skipped:
+        out["skipped"] = skipped
+    return out
+
+
+_CANDIDATES = ("kes", "prior", "prior+residual")
+
+
+def _bias_median(table) -> dict:
+    """{candidate: median NRMSE over the held-out biases 45° and 135°} of a :func:`loo_compare` table."""
+    return {c: float(np.median([table[k][c] for k in ("45", "135") if k in table and c in table[k]]))
+            for c in _CANDIDATES if any(k in table and c in table[k] for k in ("45", "135"))}
 
 
 #: Name of the KES-free baseline (:func:`orientation_interpolation_loo`) in the tables.
@@ -123,14 +149,38 @@ def choose(result: dict) -> tuple[str, str]:
     """
     med = result.get("median_biases") or {}
     four = result.get("median_all") or {}
-    interp = result.get("interpolation") or {}
+    symmetric = bool((result.get("mirror") or {}).get("symmetric"))
+    mirror_note = "biases are mirror images, so kes's bias error decides nothing; " if symmetric else ""
+    skipped = result.get("skipped")
+    if skipped:  # loo_compare(decide=True) stopped when kes was certain
+        return "kes", (mirror_note + "; ".join(settled_failures(result)) + f" (so the prior was not fitted with "
+                       f"psi = {' and '.join(skipped)} deg held out)")
     if "kes" not in med or "prior+residual" not in med or "prior" not in four or INTERPOLATION not in four:
         return "kes", "the prior could not be scored on all four orientations"
-    symmetric = bool((result.get("mirror") or {}).get("symmetric"))
-    ibias = float(np.median([interp[k] for k in ("45", "135") if k in interp] or [np.nan]))
     fails = []
     if not four["prior"] < four[INTERPOLATION]:
         fails.append("the prior does not beat interpolation over psi on all four orientations")
+    fails += bias_failures(result)
+    if fails:
+        return "kes", mirror_note + "; ".join(fails)
+    beaten = "interpolation over psi" + ("" if symmetric else " and kes")
+    return "prior+residual", mirror_note + f"the prior and prior+residual beat {beaten} where scored"
+
+
+def bias_failures(result: dict) -> list[str]:
+    """The tests of :func:`choose` that prior + residual fails on the held-out biases alone
+    (its second and third bullets), as reasons; empty when it passes them or was not scored.
+
+    They need only the biases' errors, the interpolation baseline and the mirror test,
+    so :func:`loo_compare` (``decide=True``) can stop before fitting warp and weft held out."""
+    med = result.get("median_biases") or {}
+    if "kes" not in med or "prior+residual" not in med:
+        return []
+    interp = result.get("interpolation") or {}
+    mirror = result.get("mirror") or {}
+    symmetric = bool(mirror.get("symmetric"))
+    ibias = float(np.median([interp[k] for k in ("45", "135") if k in interp] or [np.nan]))
+    fails = []
     if not med["prior+residual"] < ibias:
         fails.append("prior+residual does not beat interpolation over psi on the biases")
     if not symmetric and not med["prior+residual"] < med["kes"]:
@@ -139,15 +189,40 @@ def choose(result: dict) -> tuple[str, str]:
         # the held-out bias is the other one in the mirror: prior + residual must then
         # predict it to the noise too (within MIRROR_Z of the noise level, the larger of
         # kes's bias error and the mirror test's noise); a larger miss is a failed fit
-        level = max(float(med["kes"]), float((result.get("mirror") or {}).get("noise") or 0.0))
+        level = max(float(med["kes"]), float(mirror.get("noise") or 0.0))
         if not med["prior+residual"] <= MIRROR_Z * level:
             fails.append(f"prior+residual misses the mirrored bias ({med['prior+residual']:.3f}, more than "
                          f"{MIRROR_Z:g}x the noise level {level:.3f})")
-    mirror_note = "biases are mirror images, so kes's bias error decides nothing; " if symmetric else ""
-    if fails:
-        return "kes", mirror_note + "; ".join(fails)
-    beaten = "interpolation over psi" + ("" if symmetric else " and kes")
-    return "prior+residual", mirror_note + f"the prior and prior+residual beat {beaten} where scored"
+    return fails
+
+
+def settled_failures(result: dict) -> list[str]:
+    """The tests of :func:`choose` that the prior fails whatever the held-out orientations
+    in ``result["skipped"]`` (not fitted yet) would give; empty when none is settled.
+
+    * The all-four test: the median of four NRMSE is non-decreasing in each of them and
+      an NRMSE is ≥ 0, so the median with the unfitted ones set to 0 is a lower bound;
+      when it is not below interpolation's median the test fails (only with all four
+      orientations measured, interpolation scored on all four and the fitted ones finite:
+      otherwise :func:`choose` says the prior could not be scored, and nothing is settled).
+    * :func:`bias_failures`, once both biases are fitted.
+    """
+    table = result.get("orientations") or {}
+    pending = list(result.get("skipped") or [])
+    interp = result.get("interpolation") or {}
+    fails = []
+    fitted = [r.get("prior", np.nan) for r in table.values()]
+    ivals = list(interp.values())
+    if (len(fitted) + len(pending) == 4 and len(ivals) == 4 and np.all(np.isfinite(ivals))
+            and np.all(np.isfinite(fitted))):
+        lower = float(np.median(fitted + [0.0] * len(pending)))
+        if not lower < float(np.median(ivals)):
+            fails.append("the prior does not beat interpolation over psi on all four orientations"
+                         + (f" (its median is at least {lower:.3f}, interpolation's {float(np.median(ivals)):.3f})"
+                            if pending else ""))
+    if all(k in table for k in ("45", "135")):
+        fails += bias_failures(result)
+    return fails
 
 
 #: Folds of :func:`kfold_compare` (the CUReT protocol of docs/prior.md).
@@ -274,7 +349,7 @@ def _grid_key(m, rows):
             for a, b in zip(np.degrees(m.theta_i[rows]), np.degrees(m.theta_r[rows]))]
 
 
-def dense_orientation_loo(measurement, **fit_options) -> dict:
+def dense_orientation_loo(measurement, decide: bool = False, **fit_options) -> dict:
     """Leave-one-orientation-out NRMSE of ``fibre-coord`` and of interpolation over ψ on dense data.
 
     Each orientation ψ ∈ {0, 45, 90, 135}° is held out in turn.  ``fibre-coord`` (its pure
@@ -288,6 +363,13 @@ def dense_orientation_loo(measurement, **fit_options) -> dict:
     Returns ``{"orientations": {psi: {"fibre-coord": nrmse, INTERPOLATION: nrmse}},
     "median_all": {candidate: median over the four}}``; a candidate that cannot be scored
     on all four is left out of ``median_all``.
+
+    With ``decide=True`` (what ``kesbrdf.fit`` asks for) the ``fibre-coord`` folds stop
+    as soon as :func:`choose_dense` would keep the KES branch whatever the others give:
+    the median of the four with the unfitted ones at 0 (a lower bound, as in
+    :func:`settled_failures`) is not below interpolation's.  The orientations not fitted
+    keep their interpolation entry, ``median_all`` has no ``"fibre-coord"`` and
+    ``"skipped"`` lists them; the folds fitted are the same fits as without it.
     """
     from kesbrdf.models.fibre_coord import fit_coord
 
@@ -295,33 +377,66 @@ def dense_orientation_loo(measurement, **fit_options) -> dict:
     psi = np.degrees(np.where(m.is_in_plane, m.psi, np.nan))
     at = {p: np.abs(psi - p) < 0.5 for p in (0.0, 45.0, 90.0, 135.0)}
     table = {}
-    for p, rows in at.items():
+    for p, rows in at.items():  # interpolation over ψ first: no fit, and with decide=True it bounds the folds
         if not rows.any():
             continue
-        train = m.subset(~rows & np.isfinite(psi))
-        test = m.subset(rows)
         row = {}
-        try:
-            # the free-body fit: the body-bounded candidate doubles a fit's time (5 fits
-            # here: 27 -> 50 CPU s for 900 rows) and only helps fibre-coord (satins), so
-            # the test is the stricter one for it
-            model = fit_coord(train, **{"body_candidate": False, **fit_options})
-            row["fibre-coord"] = _nrmse(model(test.wi, test.wr), test.values)
-        except Exception:  # noqa: BLE001  (a failed fit is no evidence for the prior)
-            pass
         lo, hi = at[(p - 45.0) % 180.0], at[(p + 45.0) % 180.0]
         if lo.any() and hi.any():
             a, b = (dict(zip(_grid_key(m, nb), m.values[nb])) for nb in (lo, hi))
             nan = np.full(m.n_channels, np.nan)
             pred = np.array([0.5 * (a[k] + b[k]) if k in a and k in b else nan for k in _grid_key(m, rows)])
-            row[INTERPOLATION] = _nrmse_finite(pred, test.values)
+            row[INTERPOLATION] = _nrmse_finite(pred, m.values[rows])
         table[f"{p:g}"] = row
+    skipped = []
+    for p, rows in at.items():
+        if not rows.any():
+            continue
+        if decide and _dense_settled(table, f"{p:g}"):
+            skipped = [k for k in table if "fibre-coord" not in table[k]]
+            break
+        train = m.subset(~rows & np.isfinite(psi))
+        test = m.subset(rows)
+        try:
+            # the free-body fit: the body-bounded candidate doubles a fit's time (5 fits
+            # here: 27 -> 50 CPU s for 900 rows) and only helps fibre-coord (satins), so
+            # the test is the stricter one for it
+            model = fit_coord(train, **{"body_candidate": False, **fit_options})
+            fc = _nrmse(model(test.wi, test.wr), test.values)
+        except Exception:  # noqa: BLE001  (a failed fit is no evidence for the prior)
+            continue
+        table[f"{p:g}"] = {"fibre-coord": fc, **table[f"{p:g}"]}  # the key order of before
     median = {}
     for c in ("fibre-coord", INTERPOLATION):
         vals = [r.get(c, np.nan) for r in table.values()]
         if len(vals) == 4 and np.all(np.isfinite(vals)):
             median[c] = float(np.median(vals))
-    return {"orientations": table, "median_all": median}
+    out = {"orientations": table, "median_all": median}
+    if skipped:
+        out["skipped"] = skipped
+        out["fibre_coord_median_at_least"] = _dense_lower(table)
+    return out
+
+
+def _dense_lower(table) -> float:
+    """The median of the four ``fibre-coord`` NRMSE with the unfitted ones at 0 (a lower bound)."""
+    fitted = [r["fibre-coord"] for r in table.values() if "fibre-coord" in r]
+    return float(np.median(fitted + [0.0] * (4 - len(fitted))))
+
+
+def _dense_settled(table, nxt) -> bool:
+    """True when the KES branch is certain before fitting orientation ``nxt`` and the rest
+    (:func:`dense_orientation_loo`, ``decide=True``): four orientations with a finite
+    interpolation error each, every fold so far fitted and finite, and the lower bound
+    of fibre-coord's median not below interpolation's median."""
+    keys = list(table)
+    done = keys[:keys.index(nxt)]
+    ivals = [table[k].get(INTERPOLATION, np.nan) for k in keys]
+    if len(keys) != 4 or not done or not np.all(np.isfinite(ivals)):
+        return False
+    if not all(np.isfinite(table[k].get("fibre-coord", np.nan)) for k in done):
+        return False
+    return not _dense_lower(table) < float(np.median(ivals))
 
 
 def choose_dense(result: dict, kes_branch: str = "kes-halfdiff") -> tuple[str, str]:
@@ -331,6 +446,10 @@ def choose_dense(result: dict, kes_branch: str = "kes-halfdiff") -> tuple[str, s
     is below interpolation over ψ's, else ``kes_branch``.
     """
     med = result.get("median_all") or {}
+    if result.get("skipped") and INTERPOLATION in med:  # dense_orientation_loo(decide=True) stopped early
+        return kes_branch, (f"fibre-coord does not predict a held-out orientation better than interpolation over psi "
+                            f"(its median of four is at least {result['fibre_coord_median_at_least']:.3f} >= "
+                            f"{med[INTERPOLATION]:.3f}; psi = {' and '.join(result['skipped'])} deg not fitted)")
     if "fibre-coord" not in med or INTERPOLATION not in med:
         return kes_branch, "fibre-coord could not be scored on all four orientations"
     if med["fibre-coord"] < med[INTERPOLATION]:
