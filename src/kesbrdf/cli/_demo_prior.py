@@ -76,7 +76,8 @@ def small_plan(reference, say) -> dict:
     scored = {k: p for k, p in d["protocols"].items() if not p.get("over_budget")}
     for name, p in scored.items():
         unused = p["n_samples"] - p.get("rows_used", p["n_samples"])
-        note = f"; {unused} samples too sparse for a larger kind, not used" if unused > 0 else ""
+        # set aside by the subset rule or the prior's extras check (docs/models.md, "More rows never predict worse")
+        note = f"; {unused} samples not used: they would not improve it" if unused > 0 else ""
         stderr(f"    {name}: {p['n_samples']} samples, expected hemisphere NRMSE {p['median']:.3f} "
                f"(fit: {', '.join(p['kinds'])}{note})")
     base = scored.get("paper")
