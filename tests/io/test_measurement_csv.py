@@ -31,7 +31,8 @@ def test_general_geometry_and_spectral_channels(tmp_path):
     p = tmp_path / "g.csv"
     p.write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,nm450,nm550,nm450_unc\n30,180,30,0,0.1,0.2,0.01\n")
     m = read_measurement(p)
-    assert m.channels == ("nm450", "nm550") and m.psi is None
+    # the one row is in the plane of incidence (light opposite the viewer): it reads as psi = 0
+    assert m.channels == ("nm450", "nm550") and m.psi is not None and m.psi.tolist() == [0.0]
     np.testing.assert_allclose(m.uncertainty[0], [0.01, 0.0])
 
 
@@ -99,3 +100,31 @@ def test_good_file_fits(tmp_path):
     p = tmp_path / "ok.csv"
     p.write_text(GOOD_HEADER + _rows())
     assert main(["fit", str(p), "-o", str(tmp_path / "m.kes.json")]) == 0
+
+
+def test_a_measurement_reads_the_same_whichever_columns_wrote_it(tmp_path):
+    """The paper protocol plus out-of-plane pairs is written in the general columns (some
+    rows have no psi); read back, its in-plane rows get their psi again, so `kesbrdf fit`
+    sees the incidence lines plus extras, as in memory, and not a general measurement
+    for the scattered fit (found by trying the product: 0.733 in memory, 1.194 from the CSV)."""
+    from kesbrdf.fitting import choose_fitter
+    from kesbrdf.io.measurement_csv import format_measurement
+    from kesbrdf.measure import planning
+    from kesbrdf.references.ward import AnisotropicWard
+
+    m = planning.simulate(AnisotropicWard(0.12, 0.3), ("paper", "oop:30", "oop:60"))
+    text = format_measurement(m)
+    assert text.splitlines()[len(m.metadata) + 1].startswith("theta_i_deg,phi_i_deg")  # general columns
+    p = tmp_path / "mixed.csv"
+    p.write_text(text)
+    back = read_measurement(p)
+    np.testing.assert_array_equal(np.isfinite(back.psi), np.isfinite(m.psi))
+    np.testing.assert_allclose(back.psi[np.isfinite(m.psi)], m.psi[np.isfinite(m.psi)], atol=1e-12)
+    name, mask, *_ = choose_fitter(back)
+    name0, mask0, *_ = choose_fitter(m)
+    assert name == name0 == "kes" and mask.tolist() == mask0.tolist() and mask.sum() == 116
+    # a row at phi_r in [180, 360) stays general: the in-plane form would swap theta_i and theta_r
+    g = tmp_path / "back.csv"
+    g.write_text("theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,value\n30,0,40,180,0.1\n30,225,40,45,0.1\n")
+    two = read_measurement(g)
+    assert np.isnan(two.psi[0]) and two.psi[1] == pytest.approx(np.radians(45))

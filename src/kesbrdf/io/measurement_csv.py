@@ -148,9 +148,9 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
         phi_i = np.mod(psi + np.pi, 2 * np.pi)
         phi_r = psi.copy()
     else:
-        psi = None
         phi_i = np.mod(np.radians(numeric["phi_i_deg"]), 2 * np.pi)
         phi_r = np.mod(np.radians(numeric["phi_r_deg"]), 2 * np.pi)
+        psi = in_plane_psi(phi_i, phi_r)
 
     if quantity == "radiance_ratio":
         grazing = numeric["theta_i_deg"] >= 90.0
@@ -204,6 +204,30 @@ def parse_measurement(text: str, source: str = "<string>", sha256: str | None = 
         sha256=sha256,
         notes=notes,
     )
+
+
+#: How far (degrees) φ_i may be from φ_r + 180° for a general-form row to count as in the
+#: plane of incidence: far above the writer's 1e-9° rounding, far below any gonio step.
+IN_PLANE_TOL_DEG = 1e-4
+
+
+def in_plane_psi(phi_i, phi_r):
+    """ψ of the general-form rows that lie in the plane of incidence, NaN elsewhere; None
+    when no row does.
+
+    A row is in the plane when the light is opposite the viewer in azimuth (φ_i = φ_r +
+    180°, within :data:`IN_PLANE_TOL_DEG`) and φ_r is in [0, 180°): it is then the
+    in-plane sample ψ = φ_r, exactly what the ``psi_deg`` columns mean.  Rows at φ_r in
+    [180°, 360°) stay general (the in-plane form would swap θ_i and θ_r).  So a
+    measurement reads the same whichever column set wrote it: the paper protocol plus a
+    few out-of-plane pairs is still the paper's incidence lines plus extras
+    (docs/formats.md).
+    """
+    gap = np.abs(np.mod(phi_i - phi_r - np.pi + np.pi, 2 * np.pi) - np.pi)
+    ok = (gap < np.radians(IN_PLANE_TOL_DEG)) & (phi_r < np.pi - np.radians(IN_PLANE_TOL_DEG))
+    if not ok.any():
+        return None
+    return np.where(ok, phi_r, np.nan)
 
 
 def _classify_columns(header, source, line):
