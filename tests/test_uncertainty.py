@@ -232,7 +232,7 @@ def test_validate_reports_coverage(prior_files, tmp_path, capsys):
     assert res["within_2sigma"] >= TRAIN_MIN_2SIGMA
     assert 0 <= res["within_1sigma"] <= res["within_2sigma"] <= 1
     assert main(["validate", str(d / "k_old.kes.json"), str(d / "meas.csv")]) == 0
-    assert "carries no sigma" in capsys.readouterr().out
+    assert "holds no sigma" in capsys.readouterr().out
     assert main(["validate", str(d / "k.kes.json"), str(d / "meas.csv")]) == 0
     assert "within 1 sigma" in capsys.readouterr().out
 

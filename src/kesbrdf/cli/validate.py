@@ -49,7 +49,8 @@ def run(args) -> int:
                   f"median sigma of ln f {cov['median_sigma_log']:.3f} (on the samples the model was fitted to "
                   "this is a check, not a calibration: give validate held-out data to calibrate)")
     else:
-        print(f"uncertainty: none (a {model.kind!r} model carries no sigma)")
+        print(f"uncertainty: none (this {model.kind!r} model file holds no sigma: older than the sigma of its kind, "
+              "or a kind or interpolation without one)")
     if args.json_out:
         write_text(args.json_out, json.dumps(result, indent=1) + "\n")
         stderr(f"wrote {args.json_out}")

@@ -72,9 +72,9 @@ def predict_sigma(model, wi, wr, source: str = "model"):
     result = model.predict_sigma(wi, wr) if has_uncertainty(model) else None
     if result is None:
         raise ModelError(
-            f"{source}: a {model.kind!r} model carries no uncertainty (refit with --kind kes or --kind fibre-prior "
-            "for one; this file holds no noise or interpolation-error estimate: a KES table written before "
-            "2026-12-03, a kes-halfdiff table or a baseline)"
+            f"{source}: this {model.kind!r} model carries no uncertainty: it holds no noise or interpolation-error "
+            "estimate (a kes table written before 2026-12-03, one built with --interpolation other than kes, a "
+            "kes-halfdiff table or a baseline); refit it with kesbrdf fit (default interpolation) or --kind fibre-prior"
         )
     return result
 
