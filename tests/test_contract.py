@@ -391,7 +391,9 @@ def test_report_on_a_scattered_fit_with_its_measurement(tmp_path, capsys):
     from kesbrdf.measure.measurement import Measurement
 
     dense = read_measurement(_measurements(tmp_path)[1])
-    scattered = Measurement(dense.theta_i, dense.phi_i, dense.theta_r, dense.phi_r, dense.values)
+    # the viewer turned 10 deg out of the plane of incidence: general rows with no psi (rows
+    # in the plane would read back as in-plane samples, docs/formats.md)
+    scattered = Measurement(dense.theta_i, dense.phi_i, dense.theta_r, dense.phi_r + np.radians(10), dense.values)
     meas, model, report = tmp_path / "scattered.csv", tmp_path / "s.kes.json", tmp_path / "r.html"
     write_measurement(meas, scattered)
     assert main(["fit", str(meas), "--kind", "scattered", "-o", str(model)]) == 0
