@@ -8,7 +8,8 @@ The CLI (``kesbrdf fit``), the viewer's upload and the demo all call :func:`fit`
 * several incidence angles per orientation → ``kes-halfdiff``; with ``compare`` (the
   default) and all four orientations in the plane, the dense rule then keeps
   ``fibre-coord`` when it predicts a held-out orientation better than interpolation over
-  ψ, else ``kes-halfdiff`` (:func:`_dense_rule`, docs/models.md);
+  ψ and a held-out difference-angle band better than ``kes-halfdiff`` (eq. D2), else
+  ``kes-halfdiff`` (:func:`_dense_rule`, docs/models.md);
 * general (out-of-plane) geometries → ``scattered`` (a ``kes`` model fitted by least
   squares, with its sample-frame warp recorded).
 
@@ -89,6 +90,15 @@ class FitReport:
             return f"{c['folds']}-fold log RMSE: {parts}; kept {c.get('kept')}"
         if not med and c.get("median_all"):  # the dense rule: all four orientations only
             four = ", ".join(f"{k} {v:.3f}" for k, v in c["median_all"].items())
+            for side in ("most", "least"):  # the fibre-coord folds stopped early: a bound on its median
+                if f"fibre_coord_median_at_{side}" in c:
+                    four = f"fibre-coord at {side} {c[f'fibre_coord_median_at_{side}']:.3f}, " + four
+            bands = c.get("bands")
+            if bands:  # the second way (eq. D2): held out by difference angle
+                at_least = "at least " if bands.get("skipped") else ""
+                four += ("; held-out difference-angle bands, log SSE: "
+                         + ", ".join(f"{k} {at_least if k == 'fibre-coord' else ''}{v:.4g}"
+                                     for k, v in bands["log_sse"].items()))
             return f"leave-one-orientation-out NRMSE, median of the four orientations: {four}; kept {c.get('kept')}"
         text = f"leave-one-orientation-out NRMSE on the biases: {parts}"
         mirror = c.get("mirror") or {}
@@ -289,6 +299,8 @@ def fit(measurement, kind: str = "auto", strict: bool = False, compare: bool = T
                     mask, why_not = rows, extras["why"]
     elif check == "dense":
         comparison = _dense_rule(m)
+        if comparison and "model" in comparison:  # fitted by the rule on every row (its variant fixed the folds')
+            fitted = comparison.pop("model")
         if comparison and comparison["kept"] != name:
             name = comparison["kept"]
             mask, why_not = fitter_class(name).usable_rows(m)
@@ -548,12 +560,12 @@ def extras_groups(m, extras) -> dict:
     """Labels (N,) of the two ways :func:`_extras_check` holds extras out: ``"orientation"``
     (index of the measured ψ nearest φ_i mod π) and ``"difference angle"`` (quartile of
     x = ωi·ωr among the extras' distinct values); rows outside ``extras`` get labels too."""
+    from kesbrdf.validate.selection import difference_angle_bands
+
     psi = m.orientations()
     az = np.mod(m.phi_i, np.pi)
     gap = np.abs(np.mod(az[:, None] - psi[None, :] + np.pi / 2, np.pi) - np.pi / 2)
-    x = np.sum(m.wi * m.wr, axis=1)
-    edges = np.quantile(np.unique(np.round(x[extras], 6)), (0.25, 0.5, 0.75)) if np.any(extras) else []
-    return {"orientation": np.argmin(gap, axis=1), "difference angle": np.digitize(np.round(x, 6), edges)}
+    return {"orientation": np.argmin(gap, axis=1), "difference angle": difference_angle_bands(m, extras)}
 
 
 #: The kind the dense rule keeps when ``fibre-coord`` does not beat interpolation over ψ:
@@ -571,16 +583,21 @@ def _dense_rule(m) -> dict | None:
 
     :func:`kesbrdf.validate.selection.dense_orientation_loo`: each of the four orientations is
     held out in turn and predicted by ``fibre-coord`` fitted to the other three and by
-    interpolation over ψ; :func:`kesbrdf.validate.selection.choose_dense` keeps
-    ``fibre-coord`` when it predicts the held-out orientations better (median of four),
-    else :data:`DENSE_KES_BRANCH`.  None when the four orientations are not all there.
+    interpolation over ψ.  When ``fibre-coord`` predicts the held-out orientations better
+    (median of four), the rows are held out a second way, by difference angle
+    (:func:`kesbrdf.validate.selection.dense_band_holdout`, eq. D2: four quartile bands of
+    ωi·ωr, each predicted by ``fibre-coord`` and by :data:`DENSE_KES_BRANCH` fitted to the
+    other three), which the orientations cannot test; :func:`kesbrdf.validate.selection.choose_dense`
+    keeps ``fibre-coord`` only when both ways prefer it, else :data:`DENSE_KES_BRANCH`
+    (the pattern of the extras check, eq. X1).  None when the four orientations are not
+    all there.
     """
     if not np.all(m.is_in_plane):
         return None
     psi = np.degrees(m.psi)
     if not all(np.any(np.abs(psi - p) < 0.5) for p in (0.0, 45.0, 90.0, 135.0)):
         return None
-    from kesbrdf.validate.selection import choose_dense, dense_orientation_loo
+    from kesbrdf.validate.selection import choose_dense, dense_band_holdout, dense_orientation_loo
 
     try:
         fitter_class("fibre-coord")
@@ -589,7 +606,16 @@ def _dense_rule(m) -> dict | None:
         return None
     if len(result["orientations"]) < 4:
         return None
-    result["kept"], result["why"] = choose_dense(result, DENSE_KES_BRANCH)
+    bands = None
+    if choose_dense(result, DENSE_KES_BRANCH)[0] == "fibre-coord":  # the second way: by difference angle
+        # the model kept if the bands agree, fitted first: its filament/staple variant is the folds'
+        model = fitter_class("fibre-coord").fit_measurement(m)
+        bands = result["bands"] = dense_band_holdout(m, DENSE_KES_BRANCH, decide=True,
+                                                     kinds=tuple(model.prior.base.spec.kinds))
+        if choose_dense(result, DENSE_KES_BRANCH, bands)[0] == "fibre-coord":
+            model.remember_fit(m, "fibre-coord", {})
+            result["model"] = model
+    result["kept"], result["why"] = choose_dense(result, DENSE_KES_BRANCH, bands)
     result["median_biases"] = {}
     return result
 

@@ -343,7 +343,7 @@ def _n_params(C: int, free_td: bool) -> int:
 
 
 def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev: int = 60, base=None,
-              body_candidate: bool = True) -> CoordPrior:
+              body_candidate: bool = True, kinds="auto") -> CoordPrior:
     """Fit (C1) to the usable rows of ``m`` (module docstring): the parametric prior, then MAP corrections.
 
     ``base``: an already fitted :class:`~kesbrdf.models.fibre_physics.FibrePrior` of the
@@ -351,6 +351,9 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
     ``body_candidate``: also fit the body-bounded candidate when the free body is above
     eq. (B2)'s bound (doubles the fit's time then); the dense rule's leave-one-out fits
     (:func:`kesbrdf.validate.selection.dense_orientation_loo`) leave it out.
+    ``kinds``: the parametric prior's (warp, weft) filament/staple variant, or ``"auto"``
+    (every variant, lowest BIC: three quarters of a fit's time); the dense rule's
+    difference-angle folds (:func:`kesbrdf.validate.selection.dense_band_holdout`) fix it.
     """
     t0 = time.perf_counter()
     ok = (m.wi[:, 2] > 1e-6) & (m.wr[:, 2] > 1e-6) & np.all(np.isfinite(m.values), axis=1)
@@ -369,9 +372,9 @@ def fit_coord(m, rows=None, smooth: float = SMOOTH, pull: float = PULL, max_nfev
     x = np.sum(wi * wr, -1)
     free_td = float(np.std(x)) > THETA_D_SPREAD and int(np.count_nonzero(np.abs(x) > THETA_D_SPREAD)) >= MIN_THETA_D_SAMPLES
     # 1. the parametric prior (every family variant, BIC): the start and what the corrections multiply
-    kinds = "auto" if base is None else base.spec.kinds
+    kinds = kinds if base is None else base.spec.kinds
     if base is None:
-        base = fit_prior(m, rows=ok)
+        base = fit_prior(m, kinds=kinds, rows=ok)
     has_sd = m.uncertainty is not None
     # the body rule (kesbrdf.models.body, eq. B2): a base whose k_d is above the darkest
     # reading + 2σ is fitted again with k_d held within it, and the corrections are fitted
