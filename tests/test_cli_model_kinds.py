@@ -94,3 +94,23 @@ def test_eval_and_figure_6_work_on_halfdiff(dense, tmp_path):
     # it used to refuse with "figure 5 supports models of kind 'kes'")
     assert main(["plot", str(model), "--figure", "5", "-o", str(tmp_path / "f5.png")]) == 0
     assert (tmp_path / "f5.png").stat().st_size > 0
+
+
+def test_fit_says_the_comparisons_reason_once(tmp_path):
+    """`kesbrdf fit` printed the comparison's reason twice when it kept the prior: on the
+    comparison line and again inside the kind line (found by trying the product).  The
+    kind line now points at the comparison line instead."""
+    import kesbrdf
+    from kesbrdf.io.measurement_csv import write_measurement
+    from kesbrdf.measure import planning
+    from kesbrdf.references.irawan2012 import Irawan2012
+
+    m = planning.simulate(Irawan2012("silk_charmeuse"), ("paper",), noise=0.02, rng=0)
+    meas, model = tmp_path / "silk.csv", tmp_path / "silk.kes.json"
+    write_measurement(meas, m)
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["fit", str(meas), "-o", str(model)]) == 0
+    why = kesbrdf.fit(m)[1].comparison["why"]  # the same comparison (remembered by the rows' content)
+    text = err.getvalue()
+    assert len(why) > 20 and text.count(why) == 1 and "(the comparison above)" in text

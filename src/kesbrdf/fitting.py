@@ -111,12 +111,18 @@ class FitReport:
         why = f" ({c['why']})" if c.get("why") else ""
         return f"{text}; kept {c.get('kept')}{why}"
 
-    def summary(self) -> str:
-        """One line for a terminal: kind, why, rows."""
+    def summary(self, after_comparison: bool = False) -> str:
+        """One line for a terminal: kind, why, rows.  ``after_comparison``: the line follows
+        :meth:`comparison_summary`, which already gives the comparison's reason; it is not
+        repeated (``kesbrdf fit`` printed it twice)."""
         text = f"kind {self.kind}"
         if self.fitter != self.kind:
             text += f" ({self.fitter} fit)"
-        text += f": {self.reason}; uses {self.rows_used} of {self.rows_total} rows"
+        reason = self.reason
+        why = (self.comparison or {}).get("why")
+        if after_comparison and why and f" ({why})" in reason:
+            reason = reason.replace(f" ({why})", " (the comparison above)", 1)
+        text += f": {reason}; uses {self.rows_used} of {self.rows_total} rows"
         if self.rows_unused:
             text += f"; not used: {self.rows_unused}"
         return text

@@ -89,7 +89,7 @@ def run(args) -> int:
     model, report = kesbrdf.fit(m, kind=args.kind, strict=args.strict, compare=not args.no_compare, **options)
     if report.comparison:
         stderr(f"{args.measurement}: {report.comparison_summary()}")
-    stderr(f"{args.measurement}: {report.summary()}")
+    stderr(f"{args.measurement}: {report.summary(after_comparison=bool(report.comparison))}")
     for w in report.warnings:
         stderr(f"warning: {w}")
     model.save(args.output)
