@@ -58,6 +58,22 @@ def test_validate_prints_and_writes_json(tmp_path, fitted, capsys):
     assert "rmse" in capsys.readouterr().out
 
 
+def test_validate_says_whether_the_sigma_check_is_on_the_fitted_samples(tmp_path, fitted, capsys):
+    """The coverage caveat named the fitted samples even for another file (found by trying
+    the product); it now depends on whether the file is the one the model was fitted to."""
+    meas, model = fitted
+    capsys.readouterr()
+    assert main(["validate", str(model), str(meas)]) == 0
+    assert "these are the samples the model was fitted to" in capsys.readouterr().out
+    other = tmp_path / "other.csv"
+    assert main(["simulate", "--reference", "ward", "-o", str(other), "--noise", "0.01", "--seed", "5"]) == 0
+    js = tmp_path / "v.json"
+    assert main(["validate", str(model), str(other), "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    assert "not the file the model was fitted to" in out and "fitted to: a check" not in out
+    assert json.loads(js.read_text())["uncertainty_on"] == "other data"
+
+
 def test_eval_bad_pairs(tmp_path, fitted, capsys):
     _, model = fitted
     pairs = tmp_path / "pairs.csv"

@@ -44,10 +44,17 @@ def run(args) -> int:
         if pred.shape == m.values.shape:
             cov = coverage(pred, sigma_log, m.values)
             result["uncertainty"] = cov
+            fitted_to = (model.input_info or {}).get("sha256")
+            if fitted_to and fitted_to == m.sha256:
+                caveat = ("these are the samples the model was fitted to: a check, not a calibration; give validate "
+                          "held-out data to calibrate")
+            else:
+                caveat = ("not the file the model was fitted to: on rows it was not fitted to this tests the sigma, "
+                          "which is the model's error and leaves out this file's own noise")
+            result["uncertainty_on"] = "fitted samples" if fitted_to and fitted_to == m.sha256 else "other data"
             print(f"uncertainty: {cov['within_1sigma']:.0%} of the samples within 1 sigma, "
                   f"{cov['within_2sigma']:.0%} within 2 sigma (Gaussian: 68%, 95%); "
-                  f"median sigma of ln f {cov['median_sigma_log']:.3f} (on the samples the model was fitted to "
-                  "this is a check, not a calibration: give validate held-out data to calibrate)")
+                  f"median sigma of ln f {cov['median_sigma_log']:.3f} ({caveat})")
     else:
         print(f"uncertainty: none (this {model.kind!r} model file holds no sigma: older than the sigma of its kind, "
               "or a kind or interpolation without one)")
