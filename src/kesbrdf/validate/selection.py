@@ -425,46 +425,49 @@ def dense_orientation_loo(measurement, decide: bool = False, **fit_options) -> d
     return out
 
 
-def _dense_upper(table) -> float:
-    """The median of the four ``fibre-coord`` NRMSE with the unfitted ones at +∞ (an upper bound)."""
+def _dense_median_with(table, fill: float) -> float:
+    """The median of the four ``fibre-coord`` NRMSE with the unfitted ones at ``fill``
+    (+∞: an upper bound; 0: a lower bound)."""
     fitted = [r["fibre-coord"] for r in table.values() if "fibre-coord" in r]
-    return float(np.median(fitted + [np.inf] * (4 - len(fitted))))
+    return float(np.median(fitted + [fill] * (4 - len(fitted))))
+
+
+def _dense_upper(table) -> float:
+    return _dense_median_with(table, np.inf)
+
+
+def _dense_lower(table) -> float:
+    return _dense_median_with(table, 0.0)
+
+
+def _dense_interpolation_median(table, nxt) -> float | None:
+    """Interpolation's median over the four orientations when a bound may decide before
+    fitting orientation ``nxt`` and the rest: four orientations with a finite
+    interpolation error each and every fold so far fitted and finite; else None."""
+    keys = list(table)
+    done = keys[:keys.index(nxt)]
+    ivals = [table[k].get(INTERPOLATION, np.nan) for k in keys]
+    if len(keys) != 4 or not done or not np.all(np.isfinite(ivals)):
+        return None
+    if not all(np.isfinite(table[k].get("fibre-coord", np.nan)) for k in done):
+        return None
+    return float(np.median(ivals))
 
 
 def _dense_won(table, nxt) -> bool:
     """True when ``fibre-coord`` is certain to win the orientation hold-out before fitting
     orientation ``nxt`` and the rest (:func:`dense_orientation_loo`, ``decide=True``): the
-    conditions of :func:`_dense_settled`, and the upper bound of its median below
-    interpolation's median."""
-    keys = list(table)
-    done = keys[:keys.index(nxt)]
-    ivals = [table[k].get(INTERPOLATION, np.nan) for k in keys]
-    if len(keys) != 4 or not done or not np.all(np.isfinite(ivals)):
-        return False
-    if not all(np.isfinite(table[k].get("fibre-coord", np.nan)) for k in done):
-        return False
-    return _dense_upper(table) < float(np.median(ivals))
-
-
-def _dense_lower(table) -> float:
-    """The median of the four ``fibre-coord`` NRMSE with the unfitted ones at 0 (a lower bound)."""
-    fitted = [r["fibre-coord"] for r in table.values() if "fibre-coord" in r]
-    return float(np.median(fitted + [0.0] * (4 - len(fitted))))
+    upper bound of its median below interpolation's median."""
+    interp = _dense_interpolation_median(table, nxt)
+    return interp is not None and _dense_upper(table) < interp
 
 
 def _dense_settled(table, nxt) -> bool:
     """True when the KES branch is certain before fitting orientation ``nxt`` and the rest
-    (:func:`dense_orientation_loo`, ``decide=True``): four orientations with a finite
-    interpolation error each, every fold so far fitted and finite, and the lower bound
-    of fibre-coord's median not below interpolation's median."""
-    keys = list(table)
-    done = keys[:keys.index(nxt)]
-    ivals = [table[k].get(INTERPOLATION, np.nan) for k in keys]
-    if len(keys) != 4 or not done or not np.all(np.isfinite(ivals)):
-        return False
-    if not all(np.isfinite(table[k].get("fibre-coord", np.nan)) for k in done):
-        return False
-    return not _dense_lower(table) < float(np.median(ivals))
+    (:func:`dense_orientation_loo`, ``decide=True``): the lower bound of fibre-coord's
+    median not below interpolation's median."""
+    interp = _dense_interpolation_median(table, nxt)
+    return interp is not None and not _dense_lower(table) < interp
 
 
 def difference_angle_bands(m, rows=None) -> np.ndarray:
