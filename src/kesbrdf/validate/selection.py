@@ -503,8 +503,8 @@ def dense_band_holdout(measurement, kes_branch: str = "kes-halfdiff", decide: bo
     (:func:`difference_angle_bands`), and each band is predicted by both candidates fitted
     to the other three:
 
-    .. math:: S_c = \sum_g \sum_{k\in g} igl(\ln f^{c}_{\setminus g}(k) - \ln f_kigr)^2 ,
-              \qquad c \in \{	ext{fibre-coord}, 	ext{KES branch}\} ,  \quad (D2)
+    .. math:: S_c = \sum_g \sum_{k\in g} \bigl(\ln f^{c}_{\setminus g}(k) - \ln f_k\bigr)^2 ,
+              \qquad c \in \{\text{fibre-coord}, \text{KES branch}\} ,  \quad (D2)
 
     the log error of eq. (X1), values floored at 10⁻⁶ of the largest measured value.
     :func:`choose_dense` keeps ``fibre-coord`` only when S_fibre-coord < S_KES as well.
