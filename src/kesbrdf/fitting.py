@@ -474,9 +474,7 @@ def _extras_check(m, lines, options) -> dict:
     """
     cls = fitter_class("fibre-prior")
     lines = np.asarray(lines, bool)
-    on_lines = m.subset(lines)
-    without = cls.fit_measurement(on_lines, **options)
-    without.remember_fit(on_lines, "fibre-prior", options)
+    without = _fit_prior_on(m, lines, options)
     kinds = extras_kinds(m, ~lines)
     if len(kinds) > MAX_EXTRA_KINDS:  # too many to try one by one: all at once
         kinds = {"extra": ~lines}
@@ -519,19 +517,15 @@ def _held_out(m, lines, extras, options, without, cls) -> dict:
     if thin:
         out["why"] = f"at one {' and one '.join(thin)}, nothing holds them out: not used"
         return out
-    floor = 1e-6 * float(np.max(m.values))
+    from kesbrdf.validate.selection import LOG_FLOOR, log_sse
 
-    def log_sse(model, rows) -> float:
-        pred = np.asarray(model.evaluate(ms.wi[rows], ms.wr[rows]), float).reshape(ms.values[rows].shape)
-        d = np.log(np.maximum(pred, floor)) - np.log(np.maximum(ms.values[rows], floor))
-        return float(np.sum(d * d))
-
+    floor = LOG_FLOOR * float(np.max(m.values))  # of the whole measurement, the same for every kind
     for way, label in groups.items():
         sse_with = sse_without = 0.0
         for g in np.unique(label[held_rows]):
             held = held_rows & (label == g)
-            sse_with += log_sse(cls.fit_measurement(ms.subset(~held), **options), held)
-            sse_without += log_sse(without, held)
+            sse_with += log_sse(cls.fit_measurement(ms.subset(~held), **options).evaluate, ms, held, floor)
+            sse_without += log_sse(without.evaluate, ms, held, floor)
         out["log_sse"][way] = {"with": sse_with, "without": sse_without}
         if sse_with >= sse_without:
             break  # one way against is enough: the other need not be fitted

@@ -20,7 +20,7 @@ from kesbrdf.models.fibre_prior import FibrePriorModel, ratio_measurement, ratio
 from kesbrdf.models.lines import line as _line, on_theta_i as _on, orientation_interpolation_predictions, relative_noise  # noqa: F401
 from kesbrdf.validate.compare import leave_one_orientation_out, mirror_135_to_45
 
-__all__ = ["loo_compare", "choose", "bias_failures", "settled_failures", "dense_orientation_loo", "dense_band_holdout", "difference_angle_bands", "choose_dense", "mirror_test", "orientation_interpolation_loo", "orientation_interpolation_predictions", "relative_noise", "MIRROR_Z", "INTERPOLATION"]
+__all__ = ["loo_compare", "choose", "bias_failures", "settled_failures", "dense_orientation_loo", "dense_band_holdout", "difference_angle_bands", "log_sse", "LOG_FLOOR", "choose_dense", "mirror_test", "orientation_interpolation_loo", "orientation_interpolation_predictions", "relative_noise", "MIRROR_Z", "INTERPOLATION"]
 
 
 def _nrmse(pred, truth):
@@ -482,8 +482,15 @@ def difference_angle_bands(m, rows=None) -> np.ndarray:
     return np.digitize(x, edges)
 
 
-def _log_sse(predict, m, rows, floor) -> float:
-    """Σ (ln f̂ − ln f)² over ``rows`` of ``m`` and every channel, values floored at ``floor``."""
+#: The floor of eq. (X1)/(D2)'s log error, as a fraction of the largest measured value.
+LOG_FLOOR = 1e-6
+
+
+def log_sse(predict, m, rows, floor=None) -> float:
+    """Σ (ln f̂ − ln f)² over ``rows`` of ``m`` and every channel (eq. X1, D2), values floored
+    at ``floor`` (default :data:`LOG_FLOOR` × the largest value of ``m``)."""
+    if floor is None:
+        floor = LOG_FLOOR * float(np.max(m.values))
     pred = np.asarray(predict(m.wi[rows], m.wr[rows]), float).reshape(m.values[rows].shape)
     d = np.log(np.maximum(pred, floor)) - np.log(np.maximum(m.values[rows], floor))
     return float(np.sum(d * d))
@@ -528,13 +535,13 @@ def dense_band_holdout(measurement, kes_branch: str = "kes-halfdiff", decide: bo
     m = measurement
     label = difference_angle_bands(m)
     groups = [int(g) for g in np.unique(label)]
-    floor = 1e-6 * float(np.max(m.values))
+    floor = LOG_FLOOR * float(np.max(m.values))
     kes = fitter_class(kes_branch)
     sse = {"fibre-coord": 0.0, kes_branch: 0.0}
     for g in groups:
         held = label == g
         try:
-            sse[kes_branch] += _log_sse(kes.fit_measurement(m.subset(~held)).evaluate, m, held, floor)
+            sse[kes_branch] += log_sse(kes.fit_measurement(m.subset(~held)).evaluate, m, held, floor)
         except Exception:  # noqa: BLE001  (a failed fit is no evidence for the KES branch)
             sse[kes_branch] = float("inf")
             break
@@ -546,7 +553,7 @@ def dense_band_holdout(measurement, kes_branch: str = "kes-halfdiff", decide: bo
         held = label == g
         try:
             model = fit_coord(m.subset(~held), **{"body_candidate": False, "kinds": kinds, **fit_options})
-            sse["fibre-coord"] += _log_sse(model, m, held, floor)
+            sse["fibre-coord"] += log_sse(model, m, held, floor)
         except Exception:  # noqa: BLE001  (a failed fit is no evidence for fibre-coord)
             sse["fibre-coord"] = float("inf")
             skipped = [str(h) for h in groups[j + 1:]]
