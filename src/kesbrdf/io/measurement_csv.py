@@ -223,7 +223,7 @@ def in_plane_psi(phi_i, phi_r):
     few out-of-plane pairs is still the paper's incidence lines plus extras
     (docs/formats.md).
     """
-    gap = np.abs(np.mod(phi_i - phi_r - np.pi + np.pi, 2 * np.pi) - np.pi)
+    gap = np.abs(np.mod(phi_i - phi_r, 2 * np.pi) - np.pi)  # |φ_i − φ_r − 180°|, wrapped
     ok = (gap < np.radians(IN_PLANE_TOL_DEG)) & (phi_r < np.pi - np.radians(IN_PLANE_TOL_DEG))
     if not ok.any():
         return None
