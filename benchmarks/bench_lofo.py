@@ -17,14 +17,16 @@ Fitters:
 * ``default``: ``kesbrdf.fit(m)`` as it is now.
 
 Run alone: ``python benchmarks/bench_lofo.py [--draws N]``; it merges its section
-into benchmarks/results.json.  Rows are cached in out/bench_lofo_cache.json (delete
-it after changing a fitter).
+into benchmarks/results.json.  Rows are cached in out/bench_lofo_cache_<code>.json,
+<code> a digest of the package's source (``benchmarks/_cache.py``): a row fitted by other
+code is never reused (a cache keyed by fabric and fitter name alone served the
+library table from a superseded ``kesbrdf.fit``).
 
 On the synthetic fabric library (``kesbrdf simulate --fabric-library 2000 -o
 out/library``; docs/validation.md): ``python benchmarks/bench_lofo.py --library
 out/library --per-family K [--families ward,ggx]`` fits a stratified subsample of K
 fabrics per family, with the library's stored measurements and truths (section
-``lofo_library``; cache out/bench_lofo_library_<sha>.json).  Every fit costs 10-30 s,
+``lofo_library``; cache out/bench_lofo_library_<sha>_<code>.json).  Every fit costs 10-30 s,
 so all 2,000 fabrics would take days on two cores: K = 3-10 is the practical range.
 """
 
@@ -43,7 +45,10 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 if str(HERE.parent / "src") not in sys.path:
     sys.path.insert(0, str(HERE.parent / "src"))
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
 
+from _cache import code_cache, source_digest  # noqa: E402
 from kesbrdf.validate.lofo import (  # noqa: E402
     PROTOCOLS, choose_lofo, family_library, family_library_from, family_table, library_inputs, run_lofo,
 )
@@ -118,6 +123,8 @@ def run(draws: int = 3, names=None, cache_path: Path = CACHE, library=None, per_
         cache_path = cache_path.with_name(f"bench_lofo_library_{built.sha256[:12]}.json")
     else:
         lib = family_library(draws=draws)
+    code = source_digest()
+    cache_path = code_cache(cache_path, code)
     cache = {}
     if cache_path.is_file():
         cache = json.loads(cache_path.read_text())
@@ -155,6 +162,7 @@ def run(draws: int = 3, names=None, cache_path: Path = CACHE, library=None, per_
             out["dense_kes_branch_lofo"] = dense_branch_lofo(results)
         else:
             out["dense_kes_branch_lofo"] = {"skipped": f"needs the fitters {', '.join(sorted(needed))}"}
+    out["source_digest"] = code
     if library is not None:
         out["library"] = {"path": str(library), "sha256": built.sha256, "n": built.n, "per_family": per_family,
                           "seed": seed, "fabrics": {f: list(v) for f, v in lib.items()}}

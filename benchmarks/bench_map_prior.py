@@ -16,7 +16,8 @@
    by step 2) is written to src/kesbrdf/data/parameter_prior.json.
 
 Run: ``python benchmarks/bench_map_prior.py [--write] [--weights 1,10]``; rows are cached
-in out/bench_map_prior_cache.json (delete it after changing a fitter).
+in out/bench_map_prior_cache_<code>.json, <code> a digest of the package's source
+(``benchmarks/_cache.py``), so rows of other code are never reused.
 """
 
 from __future__ import annotations
@@ -37,12 +38,16 @@ HERE = Path(__file__).resolve().parent
 if str(HERE.parent / "src") not in sys.path:
     sys.path.insert(0, str(HERE.parent / "src"))
 
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+
+from _cache import code_cache  # noqa: E402
 from kesbrdf.geometry import cartesian_to_spherical  # noqa: E402
 from kesbrdf.measure.gonio import measure  # noqa: E402
 from kesbrdf.measure.measurement import Measurement  # noqa: E402
 from kesbrdf.validate.lofo import NOISE, fit_and_score, family_library  # noqa: E402
 
-CACHE = HERE.parent / "out" / "bench_map_prior_cache.json"
+CACHE = code_cache(HERE.parent / "out" / "bench_map_prior_cache.json")
 FAMILIES = ("irawan2012", "sadeghi2013", "ward", "ashikhmin_shirley")
 DRAWS, LIB_SEED = 3, 20
 #: Rows of the training measurement: dense in-plane rows kept, uniform and near-mirror out-of-plane pairs.

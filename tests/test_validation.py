@@ -49,3 +49,53 @@ def test_compare_reference_structure_and_perfect_isotropic():
     assert set(held) == {"kes", "nearest", "linear"}
     assert held["kes"]["all"]["rmse"] < 1e-10  # isotropic: every orientation is exact
     assert "hemisphere_theta_i30_phi_i90" in r["cases"]
+
+
+def _pairs_at_deviation(gammas_deg, theta_i_deg=30.0):
+    """Light at θ_i in the x-z plane; viewer the mirror direction turned by γ about the
+    y axis toward the normal and beyond (so the deviation is exactly γ)."""
+    from kesbrdf.geometry import spherical_to_cartesian
+
+    ti = np.radians(theta_i_deg)
+    wi = np.repeat(spherical_to_cartesian(ti, np.pi)[None, :], len(gammas_deg), axis=0)
+    tr = ti - np.radians(np.asarray(gammas_deg, float))  # signed polar angle in the x-z plane
+    wr = np.stack([np.sin(tr), np.zeros_like(tr), np.cos(tr)], axis=1)
+    return wi, wr
+
+
+def test_deviation_bands_place_an_error_in_its_band():
+    """An error put only at γ = 40° is 100 % of the squared error in the 30-60° band; the
+    other bands hold 0 and a median ratio of exactly 1; the band NRMSE uses the mean
+    |truth| of all samples (metrics' scale)."""
+    from kesbrdf.validate.compare import DEVIATION_BANDS_DEG, deviation_bands
+
+    gammas = [0.0, 5.0, 20.0, 40.0, 40.0, 70.0, 100.0]
+    wi, wr = _pairs_at_deviation(gammas)
+    truth = np.array([[4.0], [2.0], [1.0], [0.5], [0.5], [0.25], [0.25]])
+    pred = truth.copy()
+    pred[3:5] *= 2.0  # the model twice as bright at γ = 40° only
+    bands = deviation_bands(pred, truth, wi, wr)
+    by_lo = {b["lo"]: b for b in bands}
+    assert [b["lo"] for b in bands] == list(DEVIATION_BANDS_DEG[:-1])
+    assert [b["n"] for b in bands] == [2, 1, 2, 1, 1]
+    assert by_lo[30.0]["share"] == pytest.approx(1.0, abs=1e-12)
+    assert sum(b["share"] for b in bands) == pytest.approx(1.0, abs=1e-12)
+    assert by_lo[30.0]["ratio"] == pytest.approx(2.0, rel=1e-12)
+    assert all(b["share"] == 0.0 and b["ratio"] == 1.0 for b in bands if b["lo"] != 30.0)
+    assert by_lo[30.0]["nrmse"] == pytest.approx(0.5 / np.mean(truth), rel=1e-12)
+
+
+def test_validate_reports_where_the_error_is():
+    """validate() splits the error by deviation: a KES fit of an anisotropic Ward's paper
+    samples, checked on a dense measurement of the same Ward, errs on the dense grid's
+    other incidence lines; the shares sum to 1 over the bands."""
+    from kesbrdf.models.kes import fit
+    from kesbrdf.validate.compare import validate
+
+    ref = AnisotropicWard(0.1, 0.3, rho_d=0.2, rho_s=0.1)
+    model = fit(measure(ref))
+    result = validate(model, measure(ref, protocol="dense"))
+    bands = result["by_deviation"]
+    assert sum(b["n"] for b in bands) == result["n"]
+    assert sum(b["share"] for b in bands) == pytest.approx(1.0, abs=1e-9)
+    assert min(b["lo"] for b in bands) == 0.0

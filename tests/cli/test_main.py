@@ -206,3 +206,22 @@ def test_export_agreement_says_which_parameters_hit_a_bound():
                            "exact": False})
     assert line == ("fit_error openpbr: image_rmse 0.0767, nrmse 0.469, at bound: specular_ior max; "
                     "fit_error standard_surface: image_rmse 0.0763, nrmse 0.468; exact=False")
+
+
+def test_validate_says_where_the_error_is(tmp_path, fitted, capsys):
+    """On its own samples the model has no error to place; on another protocol's samples
+    validate prints one row per deviation band and --json keeps them."""
+    meas, model = fitted
+    capsys.readouterr()
+    assert main(["validate", str(model), str(meas)]) == 0
+    assert "nowhere above round-off" in capsys.readouterr().out
+    dense = tmp_path / "dense.csv"
+    assert main(["simulate", "--reference", "ward", "--protocol", "dense", "-o", str(dense), "--noise", "0.01"]) == 0
+    js = tmp_path / "v.json"
+    capsys.readouterr()
+    assert main(["validate", str(model), str(dense), "--json", str(js)]) == 0
+    out = capsys.readouterr().out
+    bands = json.loads(js.read_text())["by_deviation"]
+    assert "by deviation from the mirror direction" in out
+    assert out.count("of the squared error") == len(bands) >= 4
+    assert sum(b["share"] for b in bands) == pytest.approx(1.0, abs=1e-9)

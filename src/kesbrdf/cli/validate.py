@@ -6,7 +6,8 @@ import json
 
 from kesbrdf.cli._common import check_output, print_metrics, stderr
 
-HELP = "Compare a model with a measurement CSV; prints per-channel RMSE, relative, log and max errors."
+HELP = ("Compare a model with a measurement CSV; prints per-channel RMSE, relative, log and max errors, "
+        "and where the error is by deviation from the mirror direction.")
 
 
 def add_arguments(p):
@@ -15,6 +16,22 @@ def add_arguments(p):
     p.add_argument("--json", dest="json_out", help="also write the metrics as JSON")
     p.add_argument("--mapping", choices=("paper", "deviation", "halfvector"), default=None,
                    help="default: the model's own (deviation unless fitted otherwise)")
+
+
+#: Below this overall NRMSE the model returns the samples (round-off): no band to point at.
+ROUND_OFF_NRMSE = 1e-9
+
+
+def print_bands(bands, nrmse: float) -> None:
+    """Where the error lives, by deviation γ from the mirror direction
+    (:func:`kesbrdf.validate.compare.deviation_bands`): one row per band with samples."""
+    if nrmse < ROUND_OFF_NRMSE:
+        print("where the error is: nowhere above round-off (the model returns these samples)")
+        return
+    print("where the error is, by deviation from the mirror direction:")
+    for b in bands:
+        print(f"  {b['lo']:3.0f}-{b['hi']:3.0f} deg  n={b['n']:<5d} {b['share']:6.1%} of the squared error  "
+              f"NRMSE {b['nrmse']:.3f}  model/measured x{b['ratio']:.2f} (median)")
 
 
 def run(args) -> int:
@@ -31,6 +48,7 @@ def run(args) -> int:
     args.mapping = result["mapping"]
     result.update({"model": args.model, "measurement": args.measurement, "measurement_sha256": m.sha256})
     print_metrics(result, title=f"{args.model} vs {args.measurement} ({args.mapping})")
+    print_bands(result["by_deviation"], result["metrics"]["all"]["nrmse"])
     from kesbrdf.validate.uncertainty import coverage, has_uncertainty, predict_sigma
 
     if has_uncertainty(model):

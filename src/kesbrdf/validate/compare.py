@@ -18,6 +18,8 @@ from kesbrdf.models.kes import fit
 
 __all__ = [
     "metrics",
+    "deviation_bands",
+    "DEVIATION_BANDS_DEG",
     "validate",
     "leave_one_orientation_out",
     "compare_reference",
@@ -30,6 +32,11 @@ __all__ = [
 #: log error uses ln((p + ε)/(t + ε)) with ε = LOG_EPS_REL × max|t|: values far
 #: below the peak (dark noise) do not dominate it.
 LOG_EPS_REL = 1e-3
+#: Edges (degrees) of the bands of deviation γ from the mirror direction over which
+#: :func:`deviation_bands` splits an error: the highlight (< 15°), its shoulders (15–30°),
+#: the tails (30–60°, 60–90°) and back-scattering (> 90°), where the paper's incidence
+#: line has no sample beyond its largest deviation (84° at its 3° step).
+DEVIATION_BANDS_DEG = (0.0, 15.0, 30.0, 60.0, 90.0, 180.0)
 #: Orientations held out when comparing against a reference (between the measured ones).
 HELD_OUT_DEG = (15.0, 22.5, 30.0, 60.0, 67.5, 75.0, 105.0, 112.5, 120.0, 150.0, 157.5, 165.0)
 #: The paper's Fig. 6 lights: θ_i = π/6 with φ_i = π/2 and π/4.
@@ -64,6 +71,48 @@ def metrics(pred, truth, channels=None) -> dict:
     return out
 
 
+def deviation_bands(pred, truth, wi, wr, edges_deg=DEVIATION_BANDS_DEG) -> list[dict]:
+    r"""Where an error lives: the squared error of ``pred`` against ``truth`` split by the
+    deviation γ of ω_r from the mirror direction of ω_i (the KES γ, eq. 3–4 of the paper).
+
+    For each band [lo, hi) of ``edges_deg`` with samples in it (all channels pooled):
+
+    * ``share``: the band's part of the total squared error, Σ_band e² / Σ e² (the shares
+      of the bands sum to 1);
+    * ``nrmse``: the band's RMSE over the mean |truth| of *all* samples, the scale of
+      :func:`metrics`' nrmse, so a band's number reads against the whole;
+    * ``ratio``: the median of pred/truth over the band's values with truth > 0 (1 when
+      the model is right on average, 0.5 when it is half as bright).
+
+    >>> wi = np.array([[0.0, -np.sin(0.5), np.cos(0.5)]] * 2)
+    >>> wr = np.array([[0.0, np.sin(0.5), np.cos(0.5)], [0.0, 0.0, 1.0]])  # γ = 0 and γ ≈ 28.6°
+    >>> [(b["lo"], b["n"], b["share"], b["ratio"]) for b in deviation_bands([[1.0], [2.0]], [[1.0], [1.0]], wi, wr)]
+    [(0.0, 1, 0.0, 1.0), (15.0, 1, 1.0, 2.0)]
+    """
+    from kesbrdf.models.mappings import to_phi_gamma
+
+    truth = np.asarray(truth, float)
+    truth = truth.reshape(len(truth), -1)
+    pred = np.asarray(pred, float).reshape(truth.shape)
+    _, gamma = to_phi_gamma(np.asarray(wi, float).reshape(-1, 3), np.asarray(wr, float).reshape(-1, 3))
+    g = np.degrees(np.asarray(gamma, float)).ravel()
+    err2 = (pred - truth) ** 2
+    total = float(np.sum(err2))
+    scale = max(float(np.mean(np.abs(truth))), np.finfo(float).tiny)
+    out = []
+    for lo, hi in zip(edges_deg[:-1], edges_deg[1:]):
+        sel = (g >= lo) & (g < hi) if hi < edges_deg[-1] else (g >= lo) & (g <= hi)
+        if not np.any(sel):
+            continue
+        t, p = truth[sel], pred[sel]
+        pos = t > 0
+        out.append({"lo": float(lo), "hi": float(hi), "n": int(np.count_nonzero(sel)),
+                    "share": float(np.sum(err2[sel]) / total) if total > 0 else 0.0,
+                    "nrmse": float(np.sqrt(np.mean(err2[sel])) / scale),
+                    "ratio": float(np.median(p[pos] / t[pos])) if np.any(pos) else float("nan")})
+    return out
+
+
 def validate(model, m: Measurement, mapping: str | None = None) -> dict:
     """Metrics of ``model`` against every sample of ``m``.
 
@@ -93,7 +142,8 @@ def validate(model, m: Measurement, mapping: str | None = None) -> dict:
             raise MeasurementError(
                 f"model channels {list(model.channels)} do not match measurement channels {channels}"
             )
-    return {"mapping": mapping, "n": len(m), "metrics": metrics(pred, m.values, channels)}
+    return {"mapping": mapping, "n": len(m), "metrics": metrics(pred, m.values, channels),
+            "by_deviation": deviation_bands(pred, m.values, m.wi, m.wr)}
 
 
 def mirror_135_to_45(m: Measurement, rows) -> Measurement:
