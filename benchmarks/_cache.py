@@ -3,8 +3,9 @@
 A sweep that takes hours caches its rows on disk so that it can resume.  A row is only
 valid for the code that fitted it, so the cache file's name carries a digest of the
 package's source: after any change to ``src/kesbrdf`` a sweep starts a new cache
-instead of serving rows of a superseded fit (the library leave-one-family-out table
-was once served that way).
+instead of serving rows of a superseded fit (keyed by fabric and fitter name alone, a
+rerun of the library leave-one-family-out table after the dense rule changed would
+have served the old rule's rows).
 """
 
 from __future__ import annotations

@@ -19,8 +19,8 @@ Fitters:
 Run alone: ``python benchmarks/bench_lofo.py [--draws N]``; it merges its section
 into benchmarks/results.json.  Rows are cached in out/bench_lofo_cache_<code>.json,
 <code> a digest of the package's source (``benchmarks/_cache.py``): a row fitted by other
-code is never reused (a cache keyed by fabric and fitter name alone served the
-library table from a superseded ``kesbrdf.fit``).
+code is never reused (keyed by fabric and fitter name alone, a rerun after a change of
+``kesbrdf.fit`` would have served the old fit's rows).
 
 On the synthetic fabric library (``kesbrdf simulate --fabric-library 2000 -o
 out/library``; docs/validation.md): ``python benchmarks/bench_lofo.py --library
