@@ -132,6 +132,94 @@ def bench_summary(name: str) -> str:
     return ""
 
 
+#: Issue 20's targets, shown beside the scoreboard's numbers.
+TARGETS = {"paper_orientations": 0.05, "paper_hemispheres": 0.12, "dense_hemispheres": 0.08,
+           "flip_over_floor": 2.5, "within_1sigma": (0.60, 0.76), "within_2sigma": (0.90, 0.98)}
+
+
+def _median(values):
+    vals = sorted(float(v) for v in values)
+    if not vals:
+        return None
+    n = len(vals)
+    return vals[n // 2] if n % 2 else 0.5 * (vals[n // 2 - 1] + vals[n // 2])
+
+
+def _pair(cov) -> str:
+    return f"[{cov[0]:.2f}, {cov[1]:.2f}]" if cov else "–"
+
+
+def scoreboard(benches: dict) -> list[str]:
+    """The per-family view of issue 20's measures, gathered from the sections that hold them
+    (``lofo_library``, ``calibrate_sigma``, ``compare``, ``error_budget``); a table whose
+    section is absent is left out.  Targets in :data:`TARGETS`."""
+    t = TARGETS
+    out = []
+    lofo = benches.get("lofo_library") or {}
+    fams = lofo.get("families") or {}
+    if fams and "default" in (lofo.get("fitters") or []):
+        ratios = (lofo.get("dense_over_paper_hemispheres") or {}).get("default") or {}
+        k = (lofo.get("library") or {}).get("per_family", "?")
+        out += [f"**Accuracy and fit time** (`lofo_library`: `kesbrdf.fit`'s default, K = {k} fabrics per family of "
+                "the synthetic library, family medians; NRMSE at the held-out orientations / on the Fig. 6 "
+                f"hemispheres; targets: paper ≤ {t['paper_orientations']} / ≤ {t['paper_hemispheres']}, "
+                f"dense hemispheres ≤ {t['dense_hemispheres']} and never worse than paper)", "",
+                "| family | paper | dense | dense worse than paper | fit CPU s, paper / dense |", "|---|---|---|---|---|"]
+        for fam, row in fams.items():
+            if "paper" not in row:
+                continue
+            p, d = row["paper"]["default"], row["dense"]["default"]
+            mine = [v for key, v in ratios.items() if key.startswith(fam + "/")]
+            worse = sum(1 for v in mine if v > 1.0)
+            out.append(f"| {fam} | {fmt(p['orientations'])} / {fmt(p['hemispheres'])} | "
+                       f"{fmt(d['orientations'])} / {fmt(d['hemispheres'])} | {worse} of {len(mine)} | "
+                       f"{fmt(p['fit_cpu_s'])} / {fmt(d['fit_cpu_s'])} |")
+        out.append("")
+    sig = ((benches.get("calibrate_sigma") or {}).get("kes") or {}).get("default_lofo") or {}
+    if sig:
+        lo1, hi1 = t["within_1sigma"]
+        lo2, hi2 = t["within_2sigma"]
+        out += [f"**σ coverage of the default model, family left out** (`calibrate_sigma`, paper protocol; "
+                f"[within 1σ, within 2σ]; bands {lo1:.0%}–{hi1:.0%} and {lo2:.0%}–{hi2:.0%})", "",
+                "| family | default kinds | held-out orientations | hemisphere φ_i = 90° | φ_i = 45° | in bands |",
+                "|---|---|---|---|---|---|"]
+        for fam, row in sig.items():
+            cov = row.get("after") or {}
+            kinds = sorted(set((row.get("default_kinds") or {}).values()))
+            out.append(f"| {fam} | {', '.join(kinds)} | {_pair(cov.get('held_out'))} | {_pair(cov.get('hemi90'))} | "
+                       f"{_pair(cov.get('hemi45'))} | {fmt(row.get('in_bands_after'))} |")
+        out.append("")
+    comp = benches.get("compare") or {}
+    rend = {k: v for k, v in comp.items() if isinstance(v, dict) and "noise_flip" in v and "flip" in v}
+    if rend:
+        out += [f"**Renders** (`compare`: sphere, the default model against the reference BRDF, one exposure; "
+                f"target FLIP ≤ {t['flip_over_floor']} × the noise floor, two seeds of the reference)", "",
+                "| reference / protocol | default kind | FLIP | noise floor | × floor | relative RMSE |", "|---|---|---|---|---|---|"]
+        for key, v in rend.items():
+            ratio = v["flip"] / v["noise_flip"] if v.get("noise_flip") else float("nan")
+            out.append(f"| {key} | {fmt(v.get('model_kind'))} | {fmt(v['flip'])} | {fmt(v['noise_flip'])} | "
+                       f"{fmt(ratio)} | {fmt(v.get('rel_rmse'))} |")
+        out.append("")
+    budget = (benches.get("error_budget") or {}).get("families") or {}
+    if budget:
+        out += ["**Where the paper protocol's hemisphere error lives** (`error_budget`: the default model, family "
+                "medians; the band of deviation from the mirror direction with the largest share of the squared "
+                "error, its median model/truth ratio, and the directional albedo of the model over the reference's)",
+                "", "| family | hemisphere NRMSE | largest band | its share | model/truth there | albedo ratio θ_i = 0° / 45° |",
+                "|---|---|---|---|---|---|"]
+        for fam, row in budget.items():
+            band, b = max(row["bands"].items(), key=lambda kv: kv[1]["share"])
+            alb = row["albedo_ratio"]
+            out.append(f"| {fam} | {fmt(row['hemispheres'])} | {band}° | {b['share']:.0%} | {fmt(b['ratio'])} | "
+                       f"{' / '.join(fmt(v) for v in alb.values())} |")
+        out.append("")
+    if not out:
+        return []
+    return ["## Issue 20 scoreboard", "",
+            "Per family, gathered from the sections below (each table says which); absent sections are left out.",
+            ""] + out
+
+
 def page(results: dict) -> str:
     lines = [HEADER]
     lines += [f"kesbrdf {results.get('kesbrdf_version', '?')}; machine: {fmt(results.get('machine', {}).get('cpus'))} CPUs, "
@@ -139,6 +227,7 @@ def page(results: dict) -> str:
     benches = results.get("benchmarks", {})
     provenance = results.get("provenance", {})
     lines += ["Benchmarks: " + ", ".join(f"[{n}](#{n})" for n in benches) + ".", ""]
+    lines += scoreboard(benches)
     for name, value in benches.items():
         lines += [f"## {name}", ""]
         summary = bench_summary(name)

@@ -48,3 +48,28 @@ def test_page_shows_every_benchmark_and_its_values():
     # a changed value changes the page: the sync test above can fail
     results["benchmarks"]["toy"]["rows"] = 4
     assert rp.page(results) != text
+
+
+def test_scoreboard_gathers_the_families_and_skips_absent_sections():
+    """The issue-20 scoreboard reads lofo_library, compare and error_budget into one per-family
+    view (values at 4 significant digits, FLIP over its floor, the largest error band); with
+    none of those sections the page has no scoreboard."""
+    rp = _module()
+    cell = {"orientations": 0.031, "hemispheres": 0.2054, "fit_cpu_s": 5.5, "errors": 0}
+    benches = {
+        "lofo_library": {"fitters": ["default"], "library": {"per_family": 6},
+                         "families": {"ward": {"paper": {"default": cell},
+                                               "dense": {"default": dict(cell, hemispheres=0.0766)}}},
+                         "dense_over_paper_hemispheres": {"default": {"ward/a": 0.5, "ward/b": 1.2}}},
+        "compare": {"satin-ward/paper": {"flip": 0.09, "noise_flip": 0.03, "rel_rmse": 0.1, "model_kind": "kes"}},
+        "error_budget": {"families": {"ggx": {"hemispheres": 0.37, "albedo_ratio": {"0": 0.7, "45": 0.75},
+                                              "bands": {"0-15": {"share": 0.01, "ratio": 1.0},
+                                                        "60-90": {"share": 0.4, "ratio": 0.39}}}}},
+    }
+    lines = rp.scoreboard(benches)
+    text = "\n".join(lines)
+    assert "| ward | 0.031 / 0.2054 | 0.031 / 0.0766 | 1 of 2 | 5.5 / 5.5 |" in text
+    assert "| satin-ward/paper | kes | 0.09 | 0.03 | 3 | 0.1 |" in text
+    assert "| ggx | 0.37 | 60-90° | 40% | 0.39 | 0.7 / 0.75 |" in text
+    assert "σ coverage" not in text  # calibrate_sigma absent: its table is left out
+    assert rp.scoreboard({"toy": {"x": 1}}) == []
