@@ -33,6 +33,15 @@ allows, and stops when no group helps by more than :data:`MIN_GAIN`.
 
 With a fitted model as the truth the planner can only tell how well each protocol pins
 the model's own shape, not what the model got wrong: that needs a reference.
+
+Carrying a plan out
+-------------------
+:meth:`PlanResult.to_dict` writes, for every protocol it scored and for the recommended
+one, the rows :func:`simulate` measured (:func:`sample_table`: group, ψ, θ/φ of light and
+viewer, wi, wr; :data:`SAMPLE_COLUMNS`), so the plan can be measured without Python;
+:func:`geometry_from_table` reads them back for ``kesbrdf simulate --plan``, and
+:func:`parse_groups` is the parser of ``kesbrdf simulate --extras`` (docs/planning.md,
+"Carrying out a plan").
 """
 
 from __future__ import annotations
