@@ -166,3 +166,71 @@ def test_the_superset_check_fails_under_the_old_rule(truth, monkeypatch):
     scores = _scores(truth, ("paper", "paper+specular"), fit=lambda m: fitting.fit(m, compare=False)[0])
     assert scores["paper+specular"]["kinds"] == ["kes-halfdiff"]
     assert scores["paper+specular"]["median"] > scores["paper"]["median"] * (1 + SUPERSET_TOL)
+
+
+# -- carrying out a plan: its sample geometries (docs/planning.md, "Carrying out a plan") --
+
+#: Plan angles are written in degrees rounded to 1e-9° (1.7e-11 rad) and read back;
+#: the brief's bound for "the same angles" is 1e-9 rad.
+ANGLE_TOL_RAD = 1e-9
+#: Direction vectors are written to 12 decimals.
+VECTOR_TOL = 1e-11
+
+
+def test_sample_table_holds_the_rows_the_planner_scores():
+    groups = ("paper", "line:30", "specular:36", "oop:30")
+    rows = planning.sample_table(groups)
+    scored = planning.simulate(_ward(), groups)  # what expected_error fits and scores
+    assert len(rows) == len(scored) == 116 + 60 - 4 + 4 + 4  # line:30's θ_r = 60° lies on the paper line
+    col = {c: k for k, c in enumerate(planning.SAMPLE_COLUMNS)}
+    a = np.radians(np.array([[r[col[c]] for c in ("theta_i_deg", "phi_i_deg", "theta_r_deg", "phi_r_deg")] for r in rows]))
+    for k, name in enumerate(("theta_i", "phi_i", "theta_r", "phi_r")):
+        assert np.max(np.abs(a[:, k] - getattr(scored, name))) < ANGLE_TOL_RAD
+    wi = np.array([r[col["wi_x"]:col["wi_z"] + 1] for r in rows])
+    wr = np.array([r[col["wr_x"]:col["wr_z"] + 1] for r in rows])
+    assert np.max(np.abs(wi - scored.wi)) < VECTOR_TOL and np.max(np.abs(wr - scored.wr)) < VECTOR_TOL
+    # ψ is the sample orientation of every row: the light at ψ + 180°; in-plane rows have
+    # the viewer at ψ (the measurement CSV's psi_deg), oop rows at ψ + 90°
+    psi = np.array([r[col["psi_deg"]] for r in rows])
+    phi_i, phi_r = np.degrees(a[:, 1]), np.degrees(a[:, 3])
+    assert np.allclose(np.mod(psi + 180.0, 360.0), phi_i, atol=1e-9)
+    oop = np.array([r[0] == "oop:30" for r in rows])
+    assert oop.sum() == 4 and sorted(psi[oop]) == [0.0, 45.0, 90.0, 135.0]
+    assert np.allclose(np.mod(phi_r[oop] - psi[oop], 360.0), 90.0, atol=1e-9)
+    assert np.allclose(phi_r[~oop], psi[~oop], atol=1e-9)
+    assert np.allclose(np.degrees(scored.psi[~oop]), psi[~oop], atol=1e-9)
+    assert [r[0] for r in rows[:116]] == ["paper"] * 116 and rows[116][0] == "line:30"
+
+
+def test_geometry_from_table_inverts_sample_table():
+    groups = ("paper", "oop:30", "oop:60")
+    g = planning.geometry_from_table(planning.sample_table(groups))
+    want = planning.protocol_samples(groups)
+    for name in ("theta_i", "phi_i", "theta_r", "phi_r"):
+        assert np.max(np.abs(getattr(g, name) - getattr(want, name))) < ANGLE_TOL_RAD
+    assert np.array_equal(np.isnan(g.psi), np.isnan(want.psi)) and np.isnan(g.psi).sum() == 8
+    ok = ~np.isnan(want.psi)
+    assert np.max(np.abs(g.psi[ok] - want.psi[ok])) < ANGLE_TOL_RAD
+
+
+def test_plan_json_records_samples_of_every_scored_protocol_and_the_recommendation():
+    res = planning.PlanResult(budget=240, truths=["t"],
+                              protocols={"paper": {"groups": ["paper"], "over_budget": False, "n_samples": 116},
+                                         "dense": {"groups": ["dense"], "over_budget": True, "n_samples": 900}},
+                              recommendation=[{"add": None, "groups": ["paper"], "n_samples": 116, "median": 0.5},
+                                              {"add": "oop:30", "groups": ["paper", "oop:30"], "n_samples": 120,
+                                               "median": 0.4}])
+    doc = res.to_dict()
+    assert len(doc["protocols"]["paper"]["samples"]) == 116
+    assert "samples" not in doc["protocols"]["dense"]  # over budget: not scored, not recorded
+    assert doc["recommended"]["groups"] == ["paper", "oop:30"] and len(doc["recommended"]["samples"]) == 120
+    assert doc["sample_columns"] == list(planning.SAMPLE_COLUMNS)
+
+
+def test_parse_groups_is_the_planners_parser():
+    assert planning.parse_groups("line:30, oop:30") == ("line:30", "oop:30")
+    with pytest.raises(KesbrdfError, match=r"^--extras: sample group: expected paper, dense, specular:T, line:T or "
+                                           r"oop:T with 0 <= T < 90 deg, got 'oops:3'$"):
+        planning.parse_groups("line:30,oops:3")
+    with pytest.raises(KesbrdfError, match="^--extras: expected comma-separated sample groups"):
+        planning.parse_groups("line:30,")

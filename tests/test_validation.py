@@ -99,3 +99,22 @@ def test_validate_reports_where_the_error_is():
     assert sum(b["n"] for b in bands) == result["n"]
     assert sum(b["share"] for b in bands) == pytest.approx(1.0, abs=1e-9)
     assert min(b["lo"] for b in bands) == 0.0
+
+
+def test_leave_one_orientation_out_scores_the_incidence_line_only():
+    """With a 30° incidence line beside the paper's (``simulate --extras line:30``) the
+    check is the one of the paper rows alone: the same fits on the same rows, the other
+    rows counted as left out (before, they were scored too: Sadeghi satin 0.074)."""
+    from kesbrdf.measure import planning
+    from kesbrdf.references.sadeghi2013 import Sadeghi2013
+
+    ref = Sadeghi2013(preset="satin")
+    both = planning.simulate(ref, ("paper", "line:30"))
+    paper = planning.simulate(ref, ("paper",))
+    res, alone = leave_one_orientation_out(both), leave_one_orientation_out(paper)
+    for held in ("45", "135"):
+        assert res[held]["rows"] == 29 and res[held]["line_deg"] == 90.0
+        assert res[held]["rows_off_line"] == 14  # line:30's 15 rows at ψ, its θ_r = 60° shared with the paper line
+        assert res[held]["metrics"]["all"]["nrmse"] == pytest.approx(alone[held]["metrics"]["all"]["nrmse"],
+                                                                     rel=1e-9, abs=1e-15)
+        assert res[held]["metrics"]["all"]["nrmse"] < 1e-9  # the satin's biases are mirror images

@@ -7,7 +7,7 @@ from html.parser import HTMLParser
 import numpy as np
 import pytest
 
-from kesbrdf.plotting.report import REPORT_FIGURES, ReportInputs, build_report, collect, write_report
+from kesbrdf.plotting.report import REPORT_FIGURES, ReportInputs, _highlights, build_report, collect, write_report
 
 #: The model reproduces its in-plane input samples to round-off (docs/method.md, "From the table to a BRDF"); f_r is O(1)/sr.
 ROUND_TRIP_RMSE = 1e-12
@@ -143,3 +143,20 @@ def test_report_names_its_model_at_the_top(satin_model, satin_measurement):
     assert model_sha256(satin_model) != digest or np.array_equal(satin_model.table, model.table)
     twin = kesbrdf.fit(satin_measurement, kind="kes")[0]
     assert model_sha256(twin) == digest
+
+
+def test_summary_says_which_rows_the_left_out_orientation_scores():
+    """Issue from the new-user trial: a model fitted with extras had its "ψ = 45° left out"
+    scored on every row at 45°; the summary now names the incidence-line rows it scores
+    and the rows it leaves out, and scores those rows only."""
+    from kesbrdf.measure import planning
+    from kesbrdf.models.kes import fit
+    from kesbrdf.references.sadeghi2013 import Sadeghi2013
+
+    m = planning.simulate(Sadeghi2013(preset="satin"), ("paper", "line:30"))
+    metrics, diagnostics = collect(fit(m), m)
+    summary = {k: v for k, v in _highlights(metrics, diagnostics).items() if "left out" in k}
+    assert set(summary) == {
+        f"KES interpolation (eq. 1–2), ψ = {held}° left out, its 29 rows on θ_i + θ_r = 90° "
+        f"(14 other row(s) at ψ = {held}° not scored): nrmse" for held in ("45", "135")}
+    assert all(v < 1e-9 for v in summary.values())  # all rows scored gave 0.074

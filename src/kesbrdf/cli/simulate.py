@@ -12,10 +12,20 @@ def add_arguments(p):
     p.add_argument("-o", "--output", required=True, help="measurement CSV to write")
     p.add_argument("--reference", default="satin-ward",
                    help=f"reference BRDF: {', '.join(REFERENCES)}; or the path of any RGL .bsdf or MERL .binary "
-                   "file. The rgl-felt-* names look for their files in $KESBRDF_RGL_DIR, then in the package's "
+                   "file. The irawan-* names are the Irawan & Marschner 2012 woven-cloth presets (numpy, no data file). "
+                   "The rgl-felt-* names look for their files in $KESBRDF_RGL_DIR, then in the package's "
                    "data/rgl (white felt only); see docs/formats.md")
     p.add_argument("--params", help="JSON object of reference parameters, e.g. '{\"alpha_x\": 0.1}'")
     add_protocol_arguments(p)
+    p.add_argument("--plan", metavar="PLAN.json",
+                   help="measure the sample geometries of a plan written by kesbrdf plan (its recommended protocol, "
+                        "exactly the rows the planner scored) instead of --protocol")
+    p.add_argument("--plan-protocol", metavar="NAME",
+                   help="with --plan: another protocol of the plan (e.g. paper+out-of-plane) instead of the recommended one")
+    p.add_argument("--extras", metavar="GROUPS",
+                   help="extra sample groups measured beside the protocol (or the plan), the names kesbrdf plan uses: "
+                        "comma-separated specular:T, line:T, oop:T (0 <= T < 90 deg, each at psi = 0, 45, 90, 135), "
+                        "paper or dense; e.g. line:30,oop:30,oop:60 (docs/planning.md)")
     p.add_argument("--noise", type=float, default=0.0, help="relative noise (std / value)")
     p.add_argument("--noise-floor", type=float, default=0.0, help="absolute noise std, 1/sr")
     p.add_argument("--seed", type=int, default=0)
@@ -55,7 +65,21 @@ def run(args) -> int:
     if args.vignetting and not args.images:
         raise KesbrdfError("--vignetting: applies to camera frames only; add --images DIR")
     orientations_deg = orientations(args.orientations_deg)
+    chosen = _chosen_samples(args, orientations_deg)  # checked before the reference is built
     reference = make_reference(args.reference, args.params)
+    if chosen is not None:
+        import numpy as np
+
+        from kesbrdf.measure.gonio import measure_samples
+
+        geometry, how = chosen
+        m = measure_samples(reference, geometry, noise=args.noise, noise_floor=args.noise_floor, rng=args.seed,
+                            sample=f"simulated {args.reference}", generator=how)
+        write_measurement(args.output, m)
+        n_out = int(np.count_nonzero(np.isnan(geometry.psi)))
+        stderr(f"wrote {len(m)} simulated samples ({', '.join(m.channels)}; {n_out} out of the plane of incidence) "
+               f"of {', '.join(how['groups'])} to {args.output}")
+        return 0
     if args.images:
         from kesbrdf.measure.acquisition.camera import simulate_images
         from kesbrdf.measure.acquisition.sensor import Sensor
@@ -85,6 +109,80 @@ def run(args) -> int:
     write_measurement(args.output, m)
     stderr(f"wrote {len(m)} simulated samples ({', '.join(m.channels)}) to {args.output}")
     return 0
+
+
+def _chosen_samples(args, orientations_deg):
+    """(Geometry, generator record) of ``--plan`` and/or ``--extras``; None when neither is given."""
+    from kesbrdf.errors import KesbrdfError
+    from kesbrdf.measure import planning
+
+    if args.plan_protocol and not args.plan:
+        raise KesbrdfError(f"--plan-protocol {args.plan_protocol}: expected it with --plan PLAN.json, got no --plan")
+    if not args.plan and args.extras is None:
+        return None
+    extras = planning.parse_groups(args.extras) if args.extras is not None else ()
+    given = "--plan" if args.plan else "--extras"
+    if args.images:
+        raise KesbrdfError(f"--images: camera frames follow --protocol only; expected no {given}, got {given}")
+    if args.plan:
+        from kesbrdf.cli._protocol import PAPER_ORIENTATIONS_TEXT
+
+        set_by_user = [f"{flag} {value}" for flag, value, on in (
+            ("--protocol", args.protocol, args.protocol != "paper"),
+            ("--step-deg", args.step_deg, args.step_deg is not None),
+            ("--orientations-deg", args.orientations_deg, args.orientations_deg != PAPER_ORIENTATIONS_TEXT)) if on]
+        if set_by_user:
+            raise KesbrdfError("--plan: the plan's samples carry their own geometries; expected no --protocol, --step-deg "
+                               f"or --orientations-deg with it, got {', '.join(set_by_user)}")
+        base, groups = _plan_samples(args.plan, args.plan_protocol)
+        how = {"plan": str(args.plan), "plan_protocol": args.plan_protocol or "recommended"}
+    else:
+        base = planning.base_geometry(args.protocol, args.step_deg, orientations_deg)
+        groups = [args.protocol]
+        how = {"protocol": args.protocol, "step_deg": args.step_deg,
+               "orientations_deg": list(orientations_deg) if orientations_deg else None}
+    geometry = planning.protocol_samples(extras, base=base) if extras else base
+    how["groups"] = list(groups) + list(extras)
+    return geometry, how
+
+
+def _plan_samples(path, protocol=None):
+    """(Geometry, groups) of a plan's recommended protocol, or of the protocol ``protocol``."""
+    import json
+    from pathlib import Path
+
+    from kesbrdf.errors import KesbrdfError
+    from kesbrdf.io.files import read_regular
+    from kesbrdf.measure import planning
+
+    try:
+        doc = json.loads(read_regular(path).decode("utf-8"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise KesbrdfError(f"--plan {path}: expected the JSON of kesbrdf plan, got unreadable JSON ({exc})") from None
+    if not isinstance(doc, dict) or not isinstance(doc.get("protocols"), dict):
+        raise KesbrdfError(f"--plan {path}: expected the JSON of kesbrdf plan (with 'protocols'), got something else")
+    if protocol is None:
+        entry = doc.get("recommended")
+        what = "its recommended protocol"
+        if entry is None:
+            raise KesbrdfError(f"--plan {path}: expected a recommended protocol, got none (the paper protocol was over "
+                               "the budget); name one with --plan-protocol")
+    else:
+        entry = doc["protocols"].get(protocol)
+        what = f"protocol {protocol}"
+        if entry is None:
+            raise KesbrdfError(f"--plan-protocol: expected one of {', '.join(doc['protocols'])}, got {protocol!r}")
+        if entry.get("over_budget"):
+            raise KesbrdfError(f"--plan-protocol {protocol}: expected a protocol within the plan's budget, "
+                               f"got one of {entry.get('n_samples')} samples, over budget (not scored)")
+    if not isinstance(entry, dict):
+        raise KesbrdfError(f"--plan {path}: expected {what} as a JSON object, got {type(entry).__name__}")
+    groups = [str(g) for g in entry.get("groups") or []]
+    if "samples" not in entry:  # a plan written before plans recorded their geometries
+        stderr(f"--plan {Path(path).name}: no sample table in {what}; measuring its groups {', '.join(groups)}")
+        return planning.protocol_samples(groups), groups
+    columns = doc.get("sample_columns", list(planning.SAMPLE_COLUMNS))
+    return planning.geometry_from_table(entry["samples"], columns, source=f"--plan {path}"), groups
 
 
 def _run_library(args) -> int:

@@ -22,10 +22,10 @@ import math
 import numpy as np
 
 from kesbrdf.errors import KesbrdfError, validate_choice
-from kesbrdf.geometry import in_plane_directions
+from kesbrdf.geometry import in_plane_directions, spherical_to_cartesian
 from kesbrdf.measure.measurement import PAPER_ORIENTATIONS_DEG, Measurement
 
-__all__ = ["PROTOCOLS", "protocol_geometry", "measure"]
+__all__ = ["PROTOCOLS", "protocol_geometry", "measure", "measure_samples"]
 
 PROTOCOLS = ("paper", "dense")
 
@@ -88,11 +88,42 @@ def measure(
     Measurement
         Labelled ``simulated: true`` with the generator's parameters.
     """
+    _check_noise(noise, noise_floor)
+    psi, theta_i, theta_r = protocol_geometry(protocol, step_deg, orientations_deg)
+    wi, wr = in_plane_directions(psi, theta_i, theta_r)
+    values, uncertainty, channels = _read_values(brdf, wi, wr, noise, noise_floor, rng)
+    metadata = _metadata(brdf, sample, {"protocol": protocol, "step_deg": step_deg, "noise": noise,
+                                        "noise_floor": noise_floor})
+    return Measurement.in_plane(psi, theta_i, theta_r, values, channels=channels, uncertainty=uncertainty, metadata=metadata)
+
+
+def measure_samples(brdf, geometry, noise: float = 0.0, noise_floor: float = 0.0, rng=None,
+                    sample: str | None = None, generator: dict | None = None) -> Measurement:
+    """Measure ``brdf`` at given sample geometries, with the noise model of :func:`measure`.
+
+    ``geometry`` has ``theta_i, phi_i, theta_r, phi_r, psi`` arrays in radians (ψ NaN
+    out of the plane of incidence), e.g. a :class:`kesbrdf.measure.planning.Geometry` of
+    a plan's samples or of a protocol with extra groups (``kesbrdf simulate --plan`` /
+    ``--extras``).  ``generator`` is recorded beside the reference's parameters.
+    """
+    _check_noise(noise, noise_floor)
+    g = geometry
+    wi = spherical_to_cartesian(g.theta_i, g.phi_i)
+    wr = spherical_to_cartesian(g.theta_r, g.phi_r)
+    values, uncertainty, channels = _read_values(brdf, wi, wr, noise, noise_floor, rng)
+    metadata = _metadata(brdf, sample, {**(generator or {}), "noise": noise, "noise_floor": noise_floor})
+    return Measurement(theta_i=g.theta_i, phi_i=g.phi_i, theta_r=g.theta_r, phi_r=g.phi_r, values=values,
+                       channels=channels, uncertainty=uncertainty, psi=g.psi, metadata=metadata)
+
+
+def _check_noise(noise, noise_floor) -> None:
     for name, value in (("noise", noise), ("noise_floor", noise_floor)):
         if not (isinstance(value, (int, float, np.number)) and math.isfinite(value) and value >= 0):
             raise KesbrdfError(f"{name}: expected a finite number >= 0, got {value!r}")
-    psi, theta_i, theta_r = protocol_geometry(protocol, step_deg, orientations_deg)
-    wi, wr = in_plane_directions(psi, theta_i, theta_r)
+
+
+def _read_values(brdf, wi, wr, noise, noise_floor, rng):
+    """(values, uncertainty or None, channels) of ``brdf`` at (wi, wr) with the module's noise model."""
     values = np.asarray(brdf(wi, wr), float)
     if values.ndim == 1:
         values = values[:, None]
@@ -104,13 +135,16 @@ def measure(
         uncertainty = sigma
     else:
         uncertainty = None
+    return values, uncertainty, channels
+
+
+def _metadata(brdf, sample, how: dict) -> dict:
     params = brdf.params() if hasattr(brdf, "params") else {"reference": type(brdf).__name__}
-    generator = {**params, "protocol": protocol, "step_deg": step_deg, "noise": noise, "noise_floor": noise_floor}
-    metadata = {
+    generator = {**params, **how}
+    return {
         "sample": sample or f"simulated {params.get('reference', 'reference')}",
         "instrument": "kesbrdf virtual gonioreflectometer",
         "quantity": "brdf",
         "simulated": "true",
         "generator": json.dumps(generator, sort_keys=True),
     }
-    return Measurement.in_plane(psi, theta_i, theta_r, values, channels=channels, uncertainty=uncertainty, metadata=metadata)

@@ -33,6 +33,15 @@ allows, and stops when no group helps by more than :data:`MIN_GAIN`.
 
 With a fitted model as the truth the planner can only tell how well each protocol pins
 the model's own shape, not what the model got wrong: that needs a reference.
+
+Carrying a plan out
+-------------------
+:meth:`PlanResult.to_dict` writes, for every protocol it scored and for the recommended
+one, the rows :func:`simulate` measured (:func:`sample_table`: group, ψ, θ/φ of light and
+viewer, wi, wr; :data:`SAMPLE_COLUMNS`), so the plan can be measured without Python;
+:func:`geometry_from_table` reads them back for ``kesbrdf simulate --plan``, and
+:func:`parse_groups` is the parser of ``kesbrdf simulate --extras`` (docs/planning.md,
+"Carrying out a plan").
 """
 
 from __future__ import annotations
@@ -53,6 +62,11 @@ __all__ = [
     "PROTOCOLS",
     "CANDIDATE_GROUPS",
     "group_geometry",
+    "parse_groups",
+    "protocol_samples",
+    "sample_table",
+    "geometry_from_table",
+    "SAMPLE_COLUMNS",
     "simulate",
     "expected_error",
     "plan",
@@ -137,13 +151,123 @@ def group_geometry(name: str) -> Geometry:
     return Geometry(np.full(n, t), np.mod(psi + np.pi, 2 * np.pi), np.full(n, t), np.mod(psi + np.pi / 2, 2 * np.pi), np.full(n, np.nan))
 
 
-def protocol_samples(groups) -> Geometry:
-    """The samples of a list of groups, a sample shared by two groups kept once."""
-    g = Geometry.concat([group_geometry(name) for name in groups])
+def parse_groups(text: str, flag: str = "--extras") -> tuple[str, ...]:
+    """``"line:30,oop:30"`` -> ``("line:30", "oop:30")``, each name checked by :func:`group_geometry`.
+
+    The CLI's ``--extras`` goes through this parser, so it takes exactly the names a plan
+    records; a bad one is a one-line error naming ``flag``, what was expected and what arrived.
+    """
+    names = tuple(part.strip() for part in str(text).split(","))
+    if not names or any(not n for n in names):
+        raise KesbrdfError(f"{flag}: expected comma-separated sample groups such as line:30,oop:30, got {text!r}")
+    for name in names:
+        try:
+            group_geometry(name)
+        except KesbrdfError as exc:
+            raise KesbrdfError(f"{flag}: {exc}") from None
+    return names
+
+
+def _first_of_each(g: Geometry) -> np.ndarray:
+    """Indices of ``g``'s rows, a geometry that repeats an earlier one left out (order kept)."""
     key = np.round(np.stack([g.theta_i, g.phi_i, g.theta_r, g.phi_r], axis=1), 9)
     _, first = np.unique(key, axis=0, return_index=True)
-    keep = np.sort(first)
-    return Geometry(*(getattr(g, k)[keep] for k in ("theta_i", "phi_i", "theta_r", "phi_r", "psi")))
+    return np.sort(first)
+
+
+def _labelled(groups, base: Geometry | None = None, base_name: str = "base") -> tuple[Geometry, np.ndarray]:
+    """The samples of ``base`` (if any) then of each group, shared ones kept once, with the
+    name of the group each row comes from."""
+    parts = ([base] if base is not None else []) + [group_geometry(name) for name in groups]
+    names = ([base_name] if base is not None else []) + list(groups)
+    g = Geometry.concat(parts)
+    labels = np.concatenate([np.full(len(p), n, dtype=object) for p, n in zip(parts, names)])
+    keep = _first_of_each(g)
+    return Geometry(*(getattr(g, k)[keep] for k in ("theta_i", "phi_i", "theta_r", "phi_r", "psi"))), labels[keep]
+
+
+def protocol_samples(groups, base: Geometry | None = None) -> Geometry:
+    """The samples of a list of groups (after ``base``'s, when given), a sample shared by
+    two groups kept once."""
+    return _labelled(groups, base)[0]
+
+
+def base_geometry(protocol: str = "paper", step_deg=None, orientations_deg=None) -> Geometry:
+    """A gonio protocol (:func:`kesbrdf.measure.gonio.protocol_geometry`) as a :class:`Geometry`,
+    the base ``kesbrdf simulate --extras`` adds groups to."""
+    args = () if orientations_deg is None else (orientations_deg,)
+    return _in_plane(*protocol_geometry(protocol, step_deg, *args))
+
+
+#: Columns of a plan's sample tables (``plan.json``, docs/planning.md "Carrying out a plan").
+#: Angles in degrees in the fabric frame of the measurement CSV (docs/formats.md); ψ is the
+#: sample orientation of every row, the light at azimuth ψ + 180° (for an in-plane row the
+#: CSV's ``psi_deg``, the viewer at azimuth ψ; an ``oop`` row has its viewer at ψ + 90°);
+#: wi points toward the light, wr toward the viewer.
+SAMPLE_COLUMNS = ("group", "psi_deg", "theta_i_deg", "phi_i_deg", "theta_r_deg", "phi_r_deg",
+                  "wi_x", "wi_y", "wi_z", "wr_x", "wr_y", "wr_z")
+
+
+#: The conventions of :data:`SAMPLE_COLUMNS`, written into every plan.
+SAMPLE_CONVENTIONS = (
+    "degrees; fabric frame x = warp, y = weft, z = normal; azimuths phi from +x toward +y; wi points toward the "
+    "light, wr toward the viewer (unit vectors); psi_deg = sample orientation: the light at azimuth psi + 180; "
+    "in-plane rows (phi_i = phi_r + 180) are the measurement CSV's psi_deg,theta_i_deg,theta_r_deg with the viewer "
+    "at azimuth psi; out-of-plane (oop) rows have the viewer at psi + 90; group = the sample group of the row"
+)
+
+
+def _clean(x: float, digits: int) -> float:
+    """``x`` rounded to ``digits`` decimals, without a negative zero (87, not 87.00000000000001)."""
+    return round(float(x), digits) + 0.0
+
+
+def sample_table(groups) -> list[list]:
+    """The rows of :data:`SAMPLE_COLUMNS` of a protocol: exactly the samples
+    :func:`simulate` measures for ``groups``, in its order."""
+    g, labels = _labelled(groups)
+    wi = spherical_to_cartesian(g.theta_i, g.phi_i)
+    wr = spherical_to_cartesian(g.theta_r, g.phi_r)
+    psi = np.mod(g.phi_i - np.pi, 2 * np.pi)  # the light at ψ + 180°: ψ of in-plane rows, the orientation of oop rows
+    rows = []
+    for k in range(len(g)):
+        angles = (psi[k], g.theta_i[k], g.phi_i[k], g.theta_r[k], g.phi_r[k])
+        rows.append([str(labels[k]), *(_clean(math.degrees(a), 9) for a in angles),
+                     *(_clean(v, 12) for v in wi[k]), *(_clean(v, 12) for v in wr[k])])
+    return rows
+
+
+def geometry_from_table(rows, columns=SAMPLE_COLUMNS, source: str = "plan") -> Geometry:
+    """The :class:`Geometry` of a plan's sample table (the inverse of :func:`sample_table`).
+
+    ψ of a row is kept only where the row lies in the plane of incidence (light opposite
+    the viewer in azimuth, :func:`kesbrdf.io.measurement_csv.in_plane_psi`), as the
+    measurement CSV reader does; an out-of-plane row has ψ NaN, as :func:`group_geometry`
+    makes it.
+    """
+    from kesbrdf.io.measurement_csv import in_plane_psi
+
+    need = ("theta_i_deg", "phi_i_deg", "theta_r_deg", "phi_r_deg")
+    columns = list(columns)
+    missing = [c for c in need if c not in columns]
+    if missing:
+        raise KesbrdfError(f"{source}: expected sample columns {', '.join(need)}, missing {', '.join(missing)}")
+    if not isinstance(rows, list) or not rows:
+        raise KesbrdfError(f"{source}: expected a non-empty list of sample rows, got {type(rows).__name__}")
+    try:
+        table = np.array([[float(r[columns.index(c)]) for c in need] for r in rows], float)
+    except (TypeError, ValueError, IndexError):
+        raise KesbrdfError(f"{source}: expected rows of {len(columns)} fields ({', '.join(columns)}) "
+                           "with numeric angles") from None
+    th_i, ph_i, th_r, ph_r = np.radians(table.T)
+    bad = ~np.isfinite(table).all(axis=1) | (table[:, 0] < 0) | (table[:, 0] > 90) | (table[:, 2] < 0) | (table[:, 2] > 90)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise KesbrdfError(f"{source}: sample {k + 1}: expected theta_i_deg and theta_r_deg in [0, 90], got "
+                           f"{table[k, 0]:g} and {table[k, 2]:g}")
+    ph_i, ph_r = np.mod(ph_i, 2 * np.pi), np.mod(ph_r, 2 * np.pi)
+    psi = in_plane_psi(ph_i, ph_r)
+    return Geometry(th_i, ph_i, th_r, ph_r, np.full(th_i.size, np.nan) if psi is None else psi)
 
 
 def protocol_size(groups) -> int:
@@ -285,8 +409,22 @@ class PlanResult:
     recommendation: list = field(default_factory=list)
 
     def to_dict(self) -> dict:
-        return {"budget": self.budget, "truths": self.truths, "protocols": self.protocols,
-                "recommendation": self.recommendation, "lights_deg": [list(x) for x in PLAN_LIGHTS_DEG]}
+        """The plan as JSON: the scores, and the sample geometries an operator measures.
+
+        Every protocol within the budget gets ``"samples"`` (:func:`sample_table`: the rows
+        the planner scored, in order), and ``"recommended"`` holds the last step of the
+        greedy recommendation with its samples: what ``kesbrdf simulate --plan`` measures.
+        """
+        protocols = {name: ({**p, "samples": sample_table(p["groups"])} if not p.get("over_budget") else dict(p))
+                     for name, p in self.protocols.items()}
+        doc = {"budget": self.budget, "truths": self.truths, "protocols": protocols,
+               "recommendation": self.recommendation, "lights_deg": [list(x) for x in PLAN_LIGHTS_DEG],
+               "sample_columns": list(SAMPLE_COLUMNS), "sample_conventions": SAMPLE_CONVENTIONS}
+        if self.recommendation:
+            last = self.recommendation[-1]
+            doc["recommended"] = {"groups": list(last["groups"]), "n_samples": last["n_samples"],
+                                  "median": last["median"], "samples": sample_table(last["groups"])}
+        return doc
 
 
 def plan(truths: dict, budget: int = 200, protocols=None, candidates=CANDIDATE_GROUPS, base=("paper",),

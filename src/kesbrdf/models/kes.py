@@ -80,6 +80,7 @@ __all__ = [
     "INTERPOLATIONS",
     "FALLBACKS",
     "select_orientations",
+    "incidence_line",
     "line_weight",
     "fill_table",
     "fallback_warning",
@@ -431,11 +432,11 @@ def _kes_rows(m: Measurement, orientations):
     at = {k: in_plane[np.abs(m.psi[in_plane] - psi) < ORIENTATION_TOL] for k, psi in enumerate(psis)}
     if any(r.size == 0 for r in at.values()):
         raise MeasurementError(f"{m.source or 'measurement'}: KES needs in-plane samples at every orientation used")
-    line_sum = _incidence_line(m, np.concatenate(list(at.values())))
+    line_sum = incidence_line(m, np.concatenate(list(at.values())))
     return orientations, psis, at, line_sum
 
 
-def _incidence_line(m: Measurement, rows: np.ndarray) -> float:
+def incidence_line(m: Measurement, rows: np.ndarray) -> float:
     """The θ_i + θ_r line (radians) the KES table is built from.
 
     The paper's protocol keeps θ_i + θ_r = 90°.  Denser data sets (several θ_i per

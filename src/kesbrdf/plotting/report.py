@@ -297,6 +297,18 @@ def _get(d, *keys):
     return d
 
 
+def _loo_label(held: str, res: dict) -> str:
+    """What a leave-one-orientation-out number scores: the orientation and, when the entry
+    says so, the incidence-line rows it was taken on and the rows it left out."""
+    label = f"KES interpolation (eq. 1–2), ψ = {held}° left out"
+    if "rows" in res and "line_deg" in res:
+        label += f", its {res['rows']} rows on θ_i + θ_r = {res['line_deg']:g}°"
+        off = int(res.get("rows_off_line") or 0)
+        if off:
+            label += f" ({off} other row(s) at ψ = {held}° not scored)"
+    return label + ": nrmse"
+
+
 def _highlights(metrics, diagnostics) -> dict:
     """Key numbers found in the usual places of the validation/diagnostics dicts."""
     out: dict = {}
@@ -308,7 +320,7 @@ def _highlights(metrics, diagnostics) -> dict:
         for held, res in loo.items():
             value = _get(res, "metrics", "all", "nrmse")
             if value is not None:
-                out[f"KES interpolation (eq. 1–2), ψ = {held}° left out: nrmse"] = value
+                out[_loo_label(held, res)] = value
     ratios = _get(metrics, "reference", "ratio_kes_to")
     if isinstance(ratios, dict):
         for base, cases in ratios.items():

@@ -66,6 +66,8 @@ PARAMETERS: dict[str, dict[str, tuple]] = {
     "sadeghi-satin": _SADEGHI,
     "sadeghi-black-satin": {**_SADEGHI, "dye_factor": _number(0.0, 1.0)},
     **{f"sadeghi-{p}": _SADEGHI for p in ("linen", "silk-crepe", "satin-back", "silk-shot", "velvet")},
+    **{f"irawan-{p}": {} for p in ("cotton-denim", "silk-shantung", "silk-charmeuse", "cotton-twill",
+                                    "wool-gabardine", "polyester-lining")},
     **{f"rgl-felt-{c}": {"parameterised_by": ("choice", ("light", "viewer"), None, False)}
        for c in ("white", "pink", "purple")},
     # references given as a file path (kesbrdf.references.registry.is_reference_path)

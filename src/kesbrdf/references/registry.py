@@ -16,6 +16,11 @@ Names
 ``sadeghi-<preset>``
     Sadeghi et al. 2013 microcylinder presets (Table II), and ``sadeghi-black-satin``,
     the embedded demo fabric (:func:`kesbrdf.references.sadeghi2013.black_satin`).
+``irawan-<preset>``
+    Irawan & Marschner 2012 far-field woven cloth, the six weaves of Irawan's data
+    (:data:`kesbrdf.references.irawan2012.PRESET_NAMES`, ``_`` written ``-``:
+    ``irawan-cotton-denim``, ``irawan-silk-charmeuse``, ...); numpy only, not rendered
+    by the ``kesbrdf_reference`` plugin (:data:`RENDERABLE_REFERENCES`).
 ``rgl-felt-<colour>``
     RGL-EPFL measured felts read through Mitsuba's ``measured`` plugin; the white felt
     ships with the package (CC0), the others are found through ``$KESBRDF_RGL_DIR``.
@@ -34,7 +39,8 @@ from pathlib import Path
 from kesbrdf.errors import KesbrdfError, validate_choice
 from kesbrdf.references.params import parse_params
 
-__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "RGL_FILES", "RGL_DIRS", "SHIPPED_RGL_DIR", "make_reference", "rgl_path",
+__all__ = ["REFERENCES", "ANALYTIC_REFERENCES", "IRAWAN_REFERENCES", "RENDERABLE_REFERENCES", "RGL_FILES", "RGL_DIRS",
+           "SHIPPED_RGL_DIR", "make_reference", "rgl_path",
            "is_reference_path"]
 
 _SADEGHI_PRESETS = ("linen", "silk_crepe", "satin", "satin_back", "silk_shot", "velvet")
@@ -55,8 +61,14 @@ ANALYTIC_REFERENCES = (
     ("ward", "satin-ward", "isotropic", "ashikhmin-shirley", "ggx", "sadeghi-satin", "sadeghi-black-satin")
     + tuple(f"sadeghi-{p.replace('_', '-')}" for p in _SADEGHI_PRESETS if p != "satin")
 )
+#: The Irawan–Marschner woven-cloth presets by name (numpy only; the same weaves as the
+#: fabric library's ``irawan2012`` family, at their preset parameters).
+IRAWAN_PRESETS = ("cotton_denim", "silk_shantung", "silk_charmeuse", "cotton_twill", "wool_gabardine", "polyester_lining")
+IRAWAN_REFERENCES = tuple(f"irawan-{p.replace('_', '-')}" for p in IRAWAN_PRESETS)
 #: Every reference name, in the order the CLI lists them.
-REFERENCES = ANALYTIC_REFERENCES + tuple(RGL_FILES)
+REFERENCES = ANALYTIC_REFERENCES + IRAWAN_REFERENCES + tuple(RGL_FILES)
+#: The references the Mitsuba ``kesbrdf_reference`` plugin (or ``measured``) can render.
+RENDERABLE_REFERENCES = tuple(r for r in REFERENCES if r not in IRAWAN_REFERENCES)
 
 
 def rgl_path(name: str) -> Path:
@@ -155,6 +167,10 @@ def _build(name: str, extra: dict):
         from kesbrdf.references.sadeghi2013 import Sadeghi2013
 
         return Sadeghi2013(preset=name[len("sadeghi-"):].replace("-", "_"), **extra)
+    if name in IRAWAN_REFERENCES:
+        from kesbrdf.references.irawan2012 import Irawan2012
+
+        return Irawan2012(name[len("irawan-"):].replace("-", "_"), **extra)
     if name in RGL_FILES:
         from kesbrdf.references.rgl import RGLMeasured
 

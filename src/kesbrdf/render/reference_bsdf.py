@@ -57,7 +57,7 @@ import mitsuba as mi
 
 from kesbrdf.errors import KesbrdfError
 from kesbrdf.optics import fresnel_dielectric, schlick_weight
-from kesbrdf.references.registry import REFERENCES, RGL_FILES, make_reference, rgl_path
+from kesbrdf.references.registry import RENDERABLE_REFERENCES, RGL_FILES, make_reference, rgl_path
 from kesbrdf.render import sampling as _sampling
 from kesbrdf.render.bsdf import FabricBSDF
 
@@ -71,8 +71,9 @@ __all__ = [
     "register",
 ]
 
-#: Every reference that can be rendered: all of :data:`kesbrdf.references.registry.REFERENCES`.
-REFERENCE_NAMES = REFERENCES
+#: Every reference that can be rendered: :data:`kesbrdf.references.registry.REFERENCES` but the
+#: Irawan–Marschner presets (numpy only, no Dr.Jit form here).
+REFERENCE_NAMES = RENDERABLE_REFERENCES
 
 
 # -----------------------------------------------------------------------------------
