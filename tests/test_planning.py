@@ -234,3 +234,48 @@ def test_parse_groups_is_the_planners_parser():
         planning.parse_groups("line:30,oops:3")
     with pytest.raises(KesbrdfError, match="^--extras: expected comma-separated sample groups"):
         planning.parse_groups("line:30,")
+
+
+def test_single_difference_angle_groups_and_their_pairs():
+    """specular:T, oop:T and the paper's line have one ωi·ωr (cos 2T, cos²T and 0: θ_d = 45°
+    on every paper sample); line:T and dense have many. Pairs are of the same kind only:
+    two in-plane or two out-of-plane groups."""
+    for name in ("specular:36", "oop:30", "paper"):
+        assert planning.single_difference_angle(name), name
+    assert not planning.single_difference_angle("line:30") and not planning.single_difference_angle("dense")
+    assert planning.pair_candidates(planning.CANDIDATE_GROUPS) == [
+        ("specular:18", "specular:36"), ("specular:18", "specular:60"), ("specular:18", "specular:72"),
+        ("specular:36", "specular:60"), ("specular:36", "specular:72"), ("specular:60", "specular:72"),
+        ("oop:30", "oop:60")]
+
+
+def test_greedy_reaches_a_pair_no_single_group_helps():
+    """The greedy step stopped when no single group helped, so it never reached oop:30 +
+    oop:60, which kesbrdf.fit uses only together (one ωi·ωr each cannot be held out).
+    A fit that is exact only with two out-of-plane difference angles, and 2x too bright
+    otherwise, makes the planner recommend the pair in one step; the old loop would stop
+    at the paper protocol."""
+    truth = _ward()
+
+    class Scaled:
+        kind = "stub"
+        diagnostics = {}
+
+        def __init__(self, scale):
+            self.scale = scale
+
+        def evaluate(self, wi, wr, mapping=None):
+            return self.scale * np.asarray(truth(wi, wr), float)
+
+    def stub_fit(m):
+        out = ~m.is_in_plane
+        dots = np.round(np.sum(m.wi[out] * m.wr[out], axis=-1), 9)
+        return Scaled(1.0 if len(np.unique(dots)) >= 2 else 2.0)
+
+    res = planning.plan({"ward": truth}, budget=130, candidates=("specular:36", "oop:30", "line:30", "oop:60"),
+                        protocols={}, fit=stub_fit)
+    rec = res.to_dict()["recommendation"]
+    assert [r["add"] for r in rec] == [None, "oop:30 + oop:60"]
+    assert rec[0]["median"] >= 1.0  # 2x too bright: NRMSE = RMS(f)/mean(f) >= 1
+    assert rec[1]["median"] == pytest.approx(0.0, abs=1e-12) and rec[1]["n_samples"] == 124
+    assert res.to_dict()["recommended"]["groups"] == ["paper", "oop:30", "oop:60"]

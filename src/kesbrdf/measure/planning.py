@@ -29,7 +29,10 @@ Candidate sample groups (:func:`group_geometry`)
 :func:`plan` reports every protocol of :data:`PROTOCOLS` within the budget, then
 recommends additions to a base protocol by greedy selection: at each step it adds the
 candidate group that lowers the expected error most per sample, while the budget
-allows, and stops when no group helps by more than :data:`MIN_GAIN`.
+allows, and stops when no group helps by more than :data:`MIN_GAIN`.  Before stopping
+it tries pairs (:func:`pair_candidates`): a group whose samples share one difference
+angle (``specular:T``, ``oop:T``) cannot be held out alone by ``kesbrdf.fit``'s extras
+check, so it is never used alone and never helps alone; two of the same kind can be.
 
 With a fitted model as the truth the planner can only tell how well each protocol pins
 the model's own shape, not what the model got wrong: that needs a reference.
@@ -58,6 +61,8 @@ from kesbrdf.measure.measurement import Measurement
 from kesbrdf.validate.compare import hemisphere_directions, metrics
 
 __all__ = [
+    "pair_candidates",
+    "single_difference_angle",
     "PLAN_LIGHTS_DEG",
     "PROTOCOLS",
     "CANDIDATE_GROUPS",
@@ -427,6 +432,30 @@ class PlanResult:
         return doc
 
 
+def single_difference_angle(name: str) -> bool:
+    """Whether every sample of group ``name`` has the same ω_i·ω_r (to 1e-9): such a group
+    cannot be held out by difference angle, so ``kesbrdf.fit``'s extras check never uses
+    it alone (docs/models.md, "Extra samples")."""
+    g = group_geometry(name)
+    wi = spherical_to_cartesian(g.theta_i, g.phi_i)
+    wr = spherical_to_cartesian(g.theta_r, g.phi_r)
+    dots = np.sum(wi * wr, axis=-1)
+    return bool(np.ptp(dots) < 1e-9)
+
+
+def pair_candidates(candidates) -> list[tuple[str, str]]:
+    """Pairs of candidate groups worth trying together when no single one helps: both
+    :func:`single_difference_angle`, of the same kind for the extras check (both in the
+    plane of incidence, or both out of it), in candidate order.
+
+    >>> pair_candidates(["specular:18", "line:30", "oop:30", "specular:36", "oop:60"])
+    [('specular:18', 'specular:36'), ('oop:30', 'oop:60')]
+    """
+    single = [c for c in candidates if single_difference_angle(c)]
+    kind = {c: bool(np.all(np.isnan(group_geometry(c).psi))) for c in single}
+    return [(a, b) for i, a in enumerate(single) for b in single[i + 1:] if kind[a] == kind[b]]
+
+
 def plan(truths: dict, budget: int = 200, protocols=None, candidates=CANDIDATE_GROUPS, base=("paper",),
          fit=default_fit, noise: float = 0.0, lights_deg=PLAN_LIGHTS_DEG, step_deg: float = PLAN_GRID_STEP_DEG,
          progress=None) -> PlanResult:
@@ -466,23 +495,32 @@ def plan(truths: dict, budget: int = 200, protocols=None, candidates=CANDIDATE_G
     current = expected_error(T, chosen, fit=fit, noise=noise)["median"]
     result.recommendation.append({"add": None, "groups": list(chosen), "n_samples": size, "median": current})
     remaining = [c for c in candidates if c not in chosen]
-    while remaining:
+
+    def best_of(options):
+        """The option (a tuple of groups) that lowers the error most per sample, within budget."""
         best = None
-        for cand in remaining:
-            extra = protocol_size(chosen + [cand]) - size
+        for option in options:
+            extra = protocol_size(chosen + list(option)) - size
             if extra <= 0 or size + extra > budget:
                 continue
-            say(f"greedy step {len(result.recommendation)}: trying {cand}")
-            err = expected_error(T, chosen + [cand], fit=fit, noise=noise)["median"]
+            say(f"greedy step {len(result.recommendation)}: trying {' + '.join(option)}")
+            err = expected_error(T, chosen + list(option), fit=fit, noise=noise)["median"]
             gain = (current - err) / extra
             if best is None or gain > best[0]:
-                best = (gain, cand, err, extra)
-        if best is None or best[2] > current * (1.0 - MIN_GAIN):
+                best = (gain, option, err, extra)
+        # strictly below: at an error of 0 nothing helps (a group that changes nothing is not added)
+        return best if best is not None and best[2] < current * (1.0 - MIN_GAIN) else None
+
+    while remaining:
+        best = best_of([(c,) for c in remaining]) or best_of(pair_candidates(remaining))
+        if best is None:
             break
-        _, cand, err, extra = best
-        chosen.append(cand)
+        _, option, err, extra = best
+        chosen += list(option)
         size += extra
         current = err
-        remaining.remove(cand)
-        result.recommendation.append({"add": cand, "groups": list(chosen), "n_samples": size, "median": err})
+        for cand in option:
+            remaining.remove(cand)
+        result.recommendation.append({"add": " + ".join(option), "groups": list(chosen), "n_samples": size,
+                                      "median": err})
     return result
