@@ -1,14 +1,14 @@
 """Reference vs model renders (issue 12): FLIP and relative RMSE per reference and protocol.
 
 For each reference of :data:`kesbrdf.render.compare.DEFAULT_REFERENCES` and each protocol
-(``paper``: 116 samples, kind ``kes``; ``dense``: 6° in-plane grid, kind ``kes-halfdiff``)
-the sphere is rendered with the reference BRDF itself and with the model fitted from its
-virtual measurements (160x120, 64 spp, area light in a dark room,
-:func:`kesbrdf.render.compare.default_options`): the protocol's KES kind (``flip``,
-``rel_rmse``, as before) and the fibre prior times its residual fitted to the same
-measurement (kind ``fibre-prior``, rendered by the ``kesbrdf_prior`` plugin:
-``prior_flip``, ``prior_rel_rmse``), and the pure prior of that fit (``residual=False``:
-``prior_only_flip``, ``prior_only_rel_rmse``), which tells the prior's error from the
+(``paper``: 116 samples; ``dense``: 6° in-plane grid) the sphere is rendered with the
+reference BRDF itself and with models fitted from its virtual measurements (480x360,
+64 spp denoised, area light in a dark room, :func:`kesbrdf.render.compare.default_options`):
+``kesbrdf fit``'s default model (``flip``, ``rel_rmse``, ``model_kind``), the protocol's
+KES kind (``kes`` on the paper line, ``kes-halfdiff`` dense: ``kes_flip``,
+``kes_rel_rmse``), the fibre prior times its residual (kind ``fibre-prior``, rendered by
+the ``kesbrdf_prior`` plugin: ``prior_flip``, ``prior_rel_rmse``), and the pure prior of
+that fit (``residual=False``: ``prior_only_flip``, ``prior_only_rel_rmse``), which tells the prior's error from the
 residual's.  ``noise_*`` is the same comparison between
 two seeds of the reference: the floor below which a model error is not measurable.
 
