@@ -229,9 +229,14 @@ def _family_frame(w, alpha):
 
 
 def _seeliger(ci, cr):
-    ok = (ci > 0) & (cr > 0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(ok, ci * cr / np.where(ok, ci + cr, 1.0), 0.0)
+        return _seeliger_quiet(ci, cr)
+
+
+def _seeliger_quiet(ci, cr):
+    """:func:`_seeliger` for callers that already silence invalid/divide warnings."""
+    ok = (ci > 0) & (cr > 0)
+    return np.where(ok, ci * cr / np.where(ok, ci + cr, 1.0), 0.0)
 
 
 def _lobe_rho(cos_phi, rho):
@@ -240,30 +245,46 @@ def _lobe_rho(cos_phi, rho):
 
 def _cos_phi(wx, wy, wz, rx, ry, rz, tx, ty, tz):
     """cos of the angle between the projections of ωi and ωr on the plane ⟂ t."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return _cos_phi_quiet(wx, wy, wz, rx, ry, rz, tx, ty, tz)
+
+
+def _cos_phi_quiet(wx, wy, wz, rx, ry, rz, tx, ty, tz):
+    """:func:`_cos_phi` for callers that already silence invalid/divide warnings."""
     di = wx * tx + wy * ty + wz * tz
     dr = rx * tx + ry * ty + rz * tz
     pix, piy, piz = wx - di * tx, wy - di * ty, wz - di * tz
     prx, pry, prz = rx - dr * tx, ry - dr * ty, rz - dr * tz
     num = pix * prx + piy * pry + piz * prz
     den = np.sqrt((pix**2 + piy**2 + piz**2) * (prx**2 + pry**2 + prz**2))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.clip(np.where(den > 1e-300, num / np.maximum(den, 1e-300), 1.0), -1.0, 1.0)
+    return np.clip(np.where(den > 1e-300, num / np.maximum(den, 1e-300), 1.0), -1.0, 1.0)
 
 
-def _cos_phi_derivative(w, r, t, dt):
+def _dot(p, q):
+    """p·q of two 3-tuples of arrays, summed as p_x q_x + p_y q_y + p_z q_z."""
+    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+
+
+def _cos_phi_derivative(w, r, t, dt, dots=None):
     """d cos φ of :func:`_cos_phi` for a change dt of a unit t (w, r, t, dt: 3-tuples of arrays).
 
     With a = w·t, b = r·t: cos φ = (w·r − ab)/√((|w|² − a²)(|r|² − b²)), so
     d cos φ = −(b da + a db)/den + cos φ (a da/(|w|² − a²) + b db/(|r|² − b²)),
-    da = w·dt, db = r·dt; zero where cos φ is clipped or undefined.
+    da = w·dt, db = r·dt; zero where cos φ is clipped or undefined.  ``dots``: (w·w, r·r, w·r)
+    when the caller has them (they do not depend on t).
     """
-    dot = lambda p, q: p[0] * q[0] + p[1] * q[1] + p[2] * q[2]  # noqa: E731
-    a, b, da, db = dot(w, t), dot(r, t), dot(w, dt), dot(r, dt)
-    ii, rr = dot(w, w) - a * a, dot(r, r) - b * b
-    den = np.sqrt(np.maximum(ii * rr, 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        c = (dot(w, r) - a * b) / den
-        d = -(b * da + a * db) / den + c * (a * da / ii + b * db / rr)
+        return _cos_phi_derivative_quiet(w, r, t, dt, dots)
+
+
+def _cos_phi_derivative_quiet(w, r, t, dt, dots=None):
+    """:func:`_cos_phi_derivative` for callers that already silence invalid/divide warnings."""
+    ww, rr_, wr = dots if dots is not None else (_dot(w, w), _dot(r, r), _dot(w, r))
+    a, b, da, db = _dot(w, t), _dot(r, t), _dot(w, dt), _dot(r, dt)
+    ii, rr = ww - a * a, rr_ - b * b
+    den = np.sqrt(np.maximum(ii * rr, 0.0))
+    c = (wr - a * b) / den
+    d = -(b * da + a * db) / den + c * (a * da / ii + b * db / rr)
     return np.where((den > 1e-300) & (np.abs(c) < 1.0), d, 0.0)
 
 
@@ -357,7 +378,10 @@ def _staple_base(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):
     root = np.sqrt(e(hx) ** 2 + A * A)
     v0 = np.arctan2(-A, e(hx))
     # the frame's components, one row each, for gathering at the valid nodes in one step
-    rows = np.stack([np.broadcast_to(a, hx.shape).reshape(-1) for a in (ix, iy, iz, rx, ry, rz, hx, hy, hz, norm_sum)])
+    # and ωi'·ωi', ωr'·ωr', ωi'·ωr' (∂cos φ/∂ψ needs them; they do not depend on ψ)
+    wi_, wr_ = (ix, iy, iz), (rx, ry, rz)
+    rows = np.stack([np.broadcast_to(a, hx.shape).reshape(-1) for a in (
+        ix, iy, iz, rx, ry, rz, hx, hy, hz, norm_sum, _dot(wi_, wi_), _dot(wr_, wr_), _dot(wi_, wr_))])
     return (su, cu, Bq, root, v0, e(hx), e(hy), e(hz), (e(ix), e(iy), e(iz)), (e(rx), e(ry), e(rz)), e(norm_sum),
             rows, np.stack([su, cu]))
 
@@ -412,7 +436,7 @@ class _StapleEntry:
         self.k = k
         self.u_index = k % U
         row = k // U  # index into the (K, N) frame arrays
-        ix, iy, iz, rx, ry, rz, hx, hy, hz, ns = rows[:, row]
+        ix, iy, iz, rx, ry, rz, hx, hy, hz, ns, *dots = rows[:, row]
         wi_, wr_ = (ix, iy, iz), (rx, ry, rz)
         su, cu = sucu[:, self.u_index]
         sp, cp = e(np.sin(psi)), e(np.cos(psi))  # (K, 1, 1)
@@ -427,15 +451,17 @@ class _StapleEntry:
         tx = -cv * sp
         ty = cu * cp + su * sv * sp
         tz = -su * cp + cu * sv * sp
-        self.cphi_k = _cos_phi(*wi_, *wr_, tx, ty, tz)
-        AS = _seeliger(ci, cr)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            self.cphi_k = _cos_phi_quiet(*wi_, *wr_, tx, ty, tz)
+            AS = _seeliger_quiet(ci, cr)
         nhf = np.maximum(nh, 1e-9)
         self.G_k = AS / nhf * scale
-        self._lazy = (su, cu, hx, hy, hz, wi_, wr_, D, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz)
+        self._lazy = (su, cu, hx, hy, hz, wi_, wr_, dots, D, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale,
+                      tx, ty, tz)
         self._derivatives = None
         self._dense = {}
-        self.nbytes = sum(a.nbytes for a in (k, self.u_index, self.G_k, self.cphi_k, *wi_, *wr_,
-                                             *self._lazy[:5], *self._lazy[7:]))
+        #: bytes held, for the cache's bound: k, the u index, G, cos φ and the 25 node arrays kept
+        self.nbytes = 29 * 8 * k.size
 
     def dense(self, values) -> np.ndarray:
         """Values at the valid nodes as a (K, N, U) array, 0 elsewhere."""
@@ -458,7 +484,7 @@ class _StapleEntry:
     def derivatives_k(self):
         """(∂G/∂ψ, ∂cos φ/∂ψ) at the valid nodes (:attr:`k`)."""
         if self._derivatives is None:
-            su, cu, hx, hy, hz, wi_, wr_, D, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz = self._lazy
+            su, cu, hx, hy, hz, wi_, wr_, dots, D, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz = self._lazy
             ix, iy, iz = wi_
             rx, ry, rz = wr_
             G = self.G_k
@@ -471,10 +497,10 @@ class _StapleEntry:
                 pos = (ci > 0) & (cr > 0)
                 dAS = np.where(pos, (cr * cr * dci + ci * ci * dcr) / np.where(pos, (ci + cr) ** 2, 1.0), 0.0)
                 dG = (dAS / nhf - AS * dnh / (nhf * nhf)) * scale - G * (cp / sp)
-            dt = (-cv * cp + sv * sp * dv,
-                  -cu * sp + su * sv * cp + su * cv * sp * dv,
-                  su * sp + cu * sv * cp + cu * cv * sp * dv)
-            dcphi = _cos_phi_derivative(wi_, wr_, (tx, ty, tz), dt)
+                dt = (-cv * cp + sv * sp * dv,
+                      -cu * sp + su * sv * cp + su * cv * sp * dv,
+                      su * sp + cu * sv * cp + cu * cv * sp * dv)
+                dcphi = _cos_phi_derivative_quiet(wi_, wr_, (tx, ty, tz), dt, dots)
             self._derivatives = (dG, dcphi)
             self._lazy = None  # the intermediates are not needed again
         return self._derivatives
@@ -640,7 +666,8 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
     offset = t("axis_offset") if spec.free_axes else 0.0
     kd_cols, families = _spec_layout(spec)
     kd = np.exp(theta[kd_cols])
-    f = np.broadcast_to(kd, (N, C)).copy()
+    f = np.empty((N, C))
+    f[...] = kd
     J = np.zeros((N, C, P_))
     chans = np.arange(C)
     J[:, chans, kd_cols] = kd
