@@ -204,9 +204,10 @@ def _spec_index(spec: PriorSpec) -> dict:
 
 @functools.lru_cache(maxsize=64)
 def _spec_layout(spec: PriorSpec):
-    """Column indices :func:`evaluate_with_jacobian` fills, built once per spec: the k_d columns
-    and, per family, its k_s columns, its shape columns (u_lo, u_hi, ln s, c₂, ρ, then ψ for a
-    staple family) and its twist column (None for a filament family)."""
+    """Column indices :func:`evaluate_with_jacobian` reads and fills, built once per spec: the
+    k_d columns and, per family, (its k_s columns, its Jacobian shape columns u_lo, u_hi, ln s,
+    c₂, ρ and then ψ for a staple family, the five shape parameters' indices as a list, its
+    twist column or None for a filament family)."""
     idx = _spec_index(spec)
     C = spec.n_channels
     families = []
@@ -460,8 +461,8 @@ class _StapleEntry:
                       tx, ty, tz)
         self._derivatives = None
         self._dense = {}
-        #: bytes held, for the cache's bound: k, the u index, G, cos φ and the 25 node arrays kept
-        self.nbytes = 29 * 8 * k.size
+        #: bytes held, for the cache's bound: k, the u index, G, cos φ and up to 27 node arrays kept
+        self.nbytes = 31 * 8 * k.size
 
     def dense(self, values) -> np.ndarray:
         """Values at the valid nodes as a (K, N, U) array, 0 elsewhere."""
