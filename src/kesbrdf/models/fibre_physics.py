@@ -202,6 +202,23 @@ def _spec_index(spec: PriorSpec) -> dict:
     return {n: i for i, n in enumerate(_spec_names(spec))}
 
 
+@functools.lru_cache(maxsize=64)
+def _spec_layout(spec: PriorSpec):
+    """Column indices :func:`evaluate_with_jacobian` reads and fills, built once per spec: the
+    k_d columns and, per family, (its k_s columns, its Jacobian shape columns u_lo, u_hi, ln s,
+    c₂, ρ and then ψ for a staple family, the five shape parameters' indices as a list, its
+    twist column or None for a filament family)."""
+    idx = _spec_index(spec)
+    C = spec.n_channels
+    families = []
+    for fam, kind in zip(("warp", "weft"), spec.kinds):
+        shape = [idx[f"{fam}_{n}"] for n in ("u_lo", "u_hi", "log_s", "c2", "rho")]
+        psi = idx[f"{fam}_psi"] if kind == "staple" else None
+        families.append((np.array([idx[f"{fam}_log_ks_{c}"] for c in range(C)]),
+                         np.array(shape + ([psi] if psi is not None else [])), shape, psi))
+    return np.array([idx[f"log_kd_{c}"] for c in range(C)]), tuple(families)
+
+
 def _sigmoid(x):
     return 0.5 * (1.0 + np.tanh(0.5 * x))
 
@@ -213,9 +230,14 @@ def _family_frame(w, alpha):
 
 
 def _seeliger(ci, cr):
-    ok = (ci > 0) & (cr > 0)
     with np.errstate(invalid="ignore", divide="ignore"):
-        return np.where(ok, ci * cr / np.where(ok, ci + cr, 1.0), 0.0)
+        return _seeliger_quiet(ci, cr)
+
+
+def _seeliger_quiet(ci, cr):
+    """:func:`_seeliger` for callers that already silence invalid/divide warnings."""
+    ok = (ci > 0) & (cr > 0)
+    return np.where(ok, ci * cr / np.where(ok, ci + cr, 1.0), 0.0)
 
 
 def _lobe_rho(cos_phi, rho):
@@ -224,30 +246,46 @@ def _lobe_rho(cos_phi, rho):
 
 def _cos_phi(wx, wy, wz, rx, ry, rz, tx, ty, tz):
     """cos of the angle between the projections of ωi and ωr on the plane ⟂ t."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return _cos_phi_quiet(wx, wy, wz, rx, ry, rz, tx, ty, tz)
+
+
+def _cos_phi_quiet(wx, wy, wz, rx, ry, rz, tx, ty, tz):
+    """:func:`_cos_phi` for callers that already silence invalid/divide warnings."""
     di = wx * tx + wy * ty + wz * tz
     dr = rx * tx + ry * ty + rz * tz
     pix, piy, piz = wx - di * tx, wy - di * ty, wz - di * tz
     prx, pry, prz = rx - dr * tx, ry - dr * ty, rz - dr * tz
     num = pix * prx + piy * pry + piz * prz
     den = np.sqrt((pix**2 + piy**2 + piz**2) * (prx**2 + pry**2 + prz**2))
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return np.clip(np.where(den > 1e-300, num / np.maximum(den, 1e-300), 1.0), -1.0, 1.0)
+    return np.clip(np.where(den > 1e-300, num / np.maximum(den, 1e-300), 1.0), -1.0, 1.0)
 
 
-def _cos_phi_derivative(w, r, t, dt):
+def _dot(p, q):
+    """p·q of two 3-tuples of arrays, summed as p_x q_x + p_y q_y + p_z q_z."""
+    return p[0] * q[0] + p[1] * q[1] + p[2] * q[2]
+
+
+def _cos_phi_derivative(w, r, t, dt, dots=None):
     """d cos φ of :func:`_cos_phi` for a change dt of a unit t (w, r, t, dt: 3-tuples of arrays).
 
     With a = w·t, b = r·t: cos φ = (w·r − ab)/√((|w|² − a²)(|r|² − b²)), so
     d cos φ = −(b da + a db)/den + cos φ (a da/(|w|² − a²) + b db/(|r|² − b²)),
-    da = w·dt, db = r·dt; zero where cos φ is clipped or undefined.
+    da = w·dt, db = r·dt; zero where cos φ is clipped or undefined.  ``dots``: (w·w, r·r, w·r)
+    when the caller has them (they do not depend on t).
     """
-    dot = lambda p, q: p[0] * q[0] + p[1] * q[1] + p[2] * q[2]  # noqa: E731
-    a, b, da, db = dot(w, t), dot(r, t), dot(w, dt), dot(r, dt)
-    ii, rr = dot(w, w) - a * a, dot(r, r) - b * b
-    den = np.sqrt(np.maximum(ii * rr, 0.0))
     with np.errstate(invalid="ignore", divide="ignore"):
-        c = (dot(w, r) - a * b) / den
-        d = -(b * da + a * db) / den + c * (a * da / ii + b * db / rr)
+        return _cos_phi_derivative_quiet(w, r, t, dt, dots)
+
+
+def _cos_phi_derivative_quiet(w, r, t, dt, dots=None):
+    """:func:`_cos_phi_derivative` for callers that already silence invalid/divide warnings."""
+    ww, rr_, wr = dots if dots is not None else (_dot(w, w), _dot(r, r), _dot(w, r))
+    a, b, da, db = _dot(w, t), _dot(r, t), _dot(w, dt), _dot(r, dt)
+    ii, rr = ww - a * a, rr_ - b * b
+    den = np.sqrt(np.maximum(ii * rr, 0.0))
+    c = (wr - a * b) / den
+    d = -(b * da + a * db) / den + c * (a * da / ii + b * db / rr)
     return np.where((den > 1e-300) & (np.abs(c) < 1.0), d, 0.0)
 
 
@@ -274,8 +312,11 @@ def _profile_derivatives(u, lo, hi, log_s, c2):
     q = c2 * u * u
     P = _sigmoid(a) * _sigmoid(b) * np.exp(np.clip(q, -700, 50))
     na, nb = _sigmoid(-a), _sigmoid(-b)  # 1 − σ without the cancellation
-    dP = np.stack(np.broadcast_arrays(-P * na / s, P * nb / s, -P * (a * na + b * nb),
-                                      np.where((q > -700) & (q < 50), P * u * u, 0.0)))
+    dP = np.empty((4,) + np.shape(P))
+    dP[0] = -P * na / s
+    dP[1] = P * nb / s
+    dP[2] = -P * (a * na + b * nb)
+    dP[3] = np.where((q > -700) & (q < 50), P * u * u, 0.0)
     return P, dP
 
 
@@ -283,6 +324,16 @@ def _lobe_rho_derivative(cos_phi, rho):
     """∂N/∂ρ = −2(1 − ρ²)(1 − cos φ)/(1 − 2ρ cos φ + ρ²)²."""
     q = 1.0 - 2.0 * rho * cos_phi + rho * rho
     return -2.0 * (1.0 - rho * rho) * (1.0 - cos_phi) / (q * q)
+
+
+def _lobe_with_derivatives(cos_phi, rho):
+    """(N, ∂N/∂ρ, ∂N/∂cos φ) of :func:`_lobe_rho`, :func:`_lobe_rho_derivative` and
+    :func:`_lobe_cos_derivative` with their common denominator q = 1 − 2ρ cos φ + ρ² and q²
+    formed once (the same operations, so the same values)."""
+    q = 1.0 - 2.0 * rho * cos_phi + rho * rho
+    q2 = q * q
+    return ((1.0 - rho) ** 2 / q + 1e-4, -2.0 * (1.0 - rho * rho) * (1.0 - cos_phi) / q2,
+            2.0 * rho * (1.0 - rho) ** 2 / q2)
 
 
 _V_NODES = (np.arange(N_V) + 0.5) * (np.pi / N_V) - np.pi / 2
@@ -327,7 +378,13 @@ def _staple_base(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum):
     Bq = e(hy) * cu - e(hz) * su
     root = np.sqrt(e(hx) ** 2 + A * A)
     v0 = np.arctan2(-A, e(hx))
-    return (su, cu, Bq, root, v0, e(hx), e(hy), e(hz), (e(ix), e(iy), e(iz)), (e(rx), e(ry), e(rz)), e(norm_sum))
+    # the frame's components, one row each, for gathering at the valid nodes in one step
+    # and ωi'·ωi', ωr'·ωr', ωi'·ωr' (∂cos φ/∂ψ needs them; they do not depend on ψ)
+    wi_, wr_ = (ix, iy, iz), (rx, ry, rz)
+    rows = np.stack([np.broadcast_to(a, hx.shape).reshape(-1) for a in (
+        ix, iy, iz, rx, ry, rz, hx, hy, hz, norm_sum, _dot(wi_, wi_), _dot(wr_, wr_), _dot(wi_, wr_))])
+    return (su, cu, Bq, root, v0, e(hx), e(hy), e(hz), (e(ix), e(iy), e(iz)), (e(rx), e(ry), e(rz)), e(norm_sum),
+            rows, np.stack([su, cu]))
 
 
 def _staple_geometry(hx, hy, hz, ix, iy, iz, rx, ry, rz, norm_sum, psi):
@@ -351,67 +408,107 @@ def _staple_psi(base, psi):
 class _StapleEntry:
     """One (frame, ψ) of :func:`_staple_geometry`: G and cos φ at once, the ψ-derivatives when asked.
 
+    Only the valid tilt nodes (|D| < 1 and |v*| < π/2, 17–62 % of them in the paper
+    protocol) are computed: :attr:`k` holds their flat indices into the (K, N, U) grid and
+    ``G_k``, ``cphi_k`` their values.  Elsewhere G = 0, ∂G/∂ψ = ∂cos φ/∂ψ = 0 and cos φ
+    (finite there too) only ever multiplies G, so :attr:`G` and :attr:`cphi` fill those
+    nodes with 0 (cos φ = 0 instead of its value: every sum over u is the same bit for bit).
+    Each valid node goes through the same operations in the same order as over the whole grid.
+
     A fit evaluates the residuals at every trial step but the Jacobian only at accepted
     ones, so the derivatives (half the work) wait for :meth:`derivatives`, which finishes
     the same computation from the kept intermediates (the same operations in the same order).
     """
 
     def __init__(self, base, psi):
-        su, cu, Bq, root, v0, hx, hy, hz, wi_, wr_, ns = base
-        ix, iy, iz = wi_
-        rx, ry, rz = wr_
+        Bq, root, v0, rows, sucu = base[2], base[3], base[4], base[11], base[12]
+        self.shape = Bq.shape  # (K, N, U)
+        K, N, U = self.shape
         e = lambda a: a[..., None]  # noqa: E731  (K, N) -> (K, N, 1)
         tpsi = e(np.tan(psi))
         with np.errstate(invalid="ignore", divide="ignore"):
             D = Bq / (root * tpsi)
-        ok = np.abs(D) < 1.0
-        v = v0 + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
+        k = np.flatnonzero(np.abs(D) < 1.0)
+        D = D.reshape(-1)[k]
+        v = v0.reshape(-1)[k] + np.arccos(np.clip(D, -1.0, 1.0))  # in (−π, 2π]
         v = np.where(v > np.pi, v - 2 * np.pi, v)  # the same point in (−π, π] (irawan2012: v* wrap)
-        ok &= np.abs(v) < np.pi / 2
+        keep = np.abs(v) < np.pi / 2
+        k, D, v = k[keep], D[keep], v[keep]
+        self.k = k
+        self.u_index = k % U
+        row = k // U  # index into the (K, N) frame arrays
+        ix, iy, iz, rx, ry, rz, hx, hy, hz, ns, *dots = rows[:, row]
+        wi_, wr_ = (ix, iy, iz), (rx, ry, rz)
+        su, cu = sucu[:, self.u_index]
+        sp, cp = e(np.sin(psi)), e(np.cos(psi))  # (K, 1, 1)
+        sp, cp = (a.reshape(1) if K == 1 else a.reshape(-1)[row // N] for a in (sp, cp))
+        scale = 1.0 / (ns * np.abs(sp))
         sv, cv = np.sin(v), np.cos(v)
         nx, ny, nz = sv, su * cv, cu * cv
         ci = nx * ix + ny * iy + nz * iz
         cr = nx * rx + ny * ry + nz * rz
         nh_signed = nx * hx + ny * hy + nz * hz
         nh = np.abs(nh_signed)
-        sp, cp = e(np.sin(psi)), e(np.cos(psi))
         tx = -cv * sp
         ty = cu * cp + su * sv * sp
         tz = -su * cp + cu * sv * sp
-        self.cphi = _cos_phi(*wi_, *wr_, tx, ty, tz)
-        AS = _seeliger(ci, cr)
-        nhf = np.maximum(nh, 1e-9)
-        scale = 1.0 / (ns * np.abs(sp))
         with np.errstate(invalid="ignore", divide="ignore"):
-            self.G = np.where(ok, AS / nhf, 0.0) * scale
-        self._lazy = (base, D, ok, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz)
+            self.cphi_k = _cos_phi_quiet(*wi_, *wr_, tx, ty, tz)
+            AS = _seeliger_quiet(ci, cr)
+        nhf = np.maximum(nh, 1e-9)
+        self.G_k = AS / nhf * scale
+        self._lazy = (su, cu, hx, hy, hz, wi_, wr_, dots, D, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale,
+                      tx, ty, tz)
         self._derivatives = None
-        self.nbytes = sum(x.nbytes for x in (D, ok, sv, cv, ci, cr, nh, nh_signed, nhf, AS, tx, ty, tz, self.cphi, self.G))
+        self._dense = {}
+        #: bytes held, for the cache's bound: k, the u index, G, cos φ and up to 27 node arrays kept
+        self.nbytes = 31 * 8 * k.size
 
-    def derivatives(self):
-        """(∂G/∂ψ, ∂cos φ/∂ψ), each (K, N, U) (:func:`_staple_geometry`)."""
+    def dense(self, values) -> np.ndarray:
+        """Values at the valid nodes as a (K, N, U) array, 0 elsewhere."""
+        out = np.zeros(self.shape)
+        out.reshape(-1)[self.k] = values
+        return out
+
+    @property
+    def G(self):
+        if "G" not in self._dense:
+            self._dense["G"] = self.dense(self.G_k)
+        return self._dense["G"]
+
+    @property
+    def cphi(self):
+        if "cphi" not in self._dense:
+            self._dense["cphi"] = self.dense(self.cphi_k)
+        return self._dense["cphi"]
+
+    def derivatives_k(self):
+        """(∂G/∂ψ, ∂cos φ/∂ψ) at the valid nodes (:attr:`k`)."""
         if self._derivatives is None:
-            base, D, ok, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz = self._lazy
-            su, cu, _, _, _, hx, hy, hz, wi_, wr_, _ = base
+            su, cu, hx, hy, hz, wi_, wr_, dots, D, sv, cv, sp, cp, ci, cr, nh, nh_signed, nhf, AS, scale, tx, ty, tz = self._lazy
             ix, iy, iz = wi_
             rx, ry, rz = wr_
-            G = self.G
+            G = self.G_k
             with np.errstate(invalid="ignore", divide="ignore"):
-                dv = np.where(ok, D / (np.sqrt(np.maximum(1.0 - D * D, 1e-300)) * sp * cp), 0.0)
+                dv = D / (np.sqrt(np.maximum(1.0 - D * D, 1e-300)) * sp * cp)
                 dnx, dny, dnz = cv * dv, -su * sv * dv, -cu * sv * dv
                 dci = dnx * ix + dny * iy + dnz * iz
                 dcr = dnx * rx + dny * ry + dnz * rz
                 dnh = np.where(nh > 1e-9, np.sign(nh_signed) * (dnx * hx + dny * hy + dnz * hz), 0.0)
                 pos = (ci > 0) & (cr > 0)
                 dAS = np.where(pos, (cr * cr * dci + ci * ci * dcr) / np.where(pos, (ci + cr) ** 2, 1.0), 0.0)
-                dG = np.where(ok, dAS / nhf - AS * dnh / (nhf * nhf), 0.0) * scale - G * (cp / sp)
-            dt = (-cv * cp + sv * sp * dv,
-                  -cu * sp + su * sv * cp + su * cv * sp * dv,
-                  su * sp + cu * sv * cp + cu * cv * sp * dv)
-            dcphi = _cos_phi_derivative(wi_, wr_, (tx, ty, tz), dt)
-            self._derivatives = (dG, np.where(ok, dcphi, 0.0))
+                dG = (dAS / nhf - AS * dnh / (nhf * nhf)) * scale - G * (cp / sp)
+                dt = (-cv * cp + sv * sp * dv,
+                      -cu * sp + su * sv * cp + su * cv * sp * dv,
+                      su * sp + cu * sv * cp + cu * cv * sp * dv)
+                dcphi = _cos_phi_derivative_quiet(wi_, wr_, (tx, ty, tz), dt, dots)
+            self._derivatives = (dG, dcphi)
             self._lazy = None  # the intermediates are not needed again
         return self._derivatives
+
+    def derivatives(self):
+        """(∂G/∂ψ, ∂cos φ/∂ψ), each (K, N, U) (:func:`_staple_geometry`)."""
+        return tuple(self.dense(a) for a in self.derivatives_k())
 
 
 def _staple_cached(cache, fam, alpha, offset, psi, h, wi, wr, norm_sum) -> _StapleEntry:
@@ -429,6 +526,15 @@ def _staple_combine(G, cphi, lo, hi, log_s, c2, rho):
     e = lambda a: a[..., None]  # noqa: E731
     P = _profile(_U_NODES, e(lo), e(hi), e(log_s), e(c2))  # (B, 1, U)
     return np.sum(P * _lobe_rho(cphi, e(rho)) * G, axis=-1) * _DU
+
+
+def _staple_combine_k(entry: _StapleEntry, lo, hi, log_s, c2, rho):
+    """:func:`_staple_combine` for one parameter vector (B = 1) from the valid nodes of ``entry``
+    (the products are 0 at the others, as over the whole grid)."""
+    e = lambda a: a[..., None]  # noqa: E731
+    P = _profile(_U_NODES, e(lo), e(hi), e(log_s), e(c2))  # (1, 1, U)
+    terms = P.reshape(-1)[entry.u_index] * _lobe_rho(entry.cphi_k, e(rho).reshape(-1)) * entry.G_k
+    return np.sum(entry.dense(terms), axis=-1) * _DU
 
 
 #: Bound of a geometry cache (a staple entry holds four (N, U) arrays: 0.9 MB at N = 900).
@@ -505,7 +611,7 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
             if B == 1:
                 entry = _staple_cached(cache, fam, alpha, float(offset[0]), float(theta[0, idx[f"{fam}_psi"]]),
                                        h, wi, wr, norm_sum)
-                G, cphi = entry.G, entry.cphi
+                S = _staple_combine_k(entry, *shape_params)
             else:
                 key = np.column_stack([offset, col(f"{fam}_psi")[:, 0]])
                 uniq, inv = np.unique(key, axis=0, return_inverse=True)
@@ -513,7 +619,7 @@ def evaluate_batch(spec: PriorSpec, theta, wi, wr, cache: dict | None = None) ->
                 inv = np.asarray(inv).reshape(-1)
                 G = np.concatenate([q.G for q in parts])[inv]
                 cphi = np.concatenate([q.cphi for q in parts])[inv]
-            S = _staple_combine(G, cphi, *shape_params)
+                S = _staple_combine(G, cphi, *shape_params)
         ks = np.exp(theta[:, [idx[f"{fam}_log_ks_{c}"] for c in range(C)]])  # (B, C)
         f = f + (Phi * S)[..., None] * ks[:, None, :]
     return f
@@ -559,39 +665,44 @@ def evaluate_with_jacobian(spec: PriorSpec, theta, wi, wr, cache: dict | None = 
         q = t("d1") * x + t("d2") * x * x
         Phi = Phi0 * np.exp(np.clip(q, -50, 50))
     offset = t("axis_offset") if spec.free_axes else 0.0
-    kd = np.exp(theta[[idx[f"log_kd_{c}"] for c in range(C)]])
-    f = np.broadcast_to(kd, (N, C)).copy()
+    kd_cols, families = _spec_layout(spec)
+    kd = np.exp(theta[kd_cols])
+    f = np.empty((N, C))
+    f[...] = kd
     J = np.zeros((N, C, P_))
     chans = np.arange(C)
-    J[:, chans, [idx[f"log_kd_{c}"] for c in range(C)]] = kd
+    J[:, chans, kd_cols] = kd
     spec_sum = np.zeros((N, C))
     geometry_cols = []
-    for fam, kind, alpha in zip(("warp", "weft"), spec.kinds, (0.0, np.pi / 2)):
-        lo, hi, log_s, c2, rho = (t(f"{fam}_{n}") for n in ("u_lo", "u_hi", "log_s", "c2", "rho"))
-        shape_cols = [idx[f"{fam}_{n}"] for n in ("u_lo", "u_hi", "log_s", "c2", "rho")]
+    for fam, kind, alpha, (ks_cols, shape_cols, shape_idx, psi_col) in zip(
+            ("warp", "weft"), spec.kinds, (0.0, np.pi / 2), families):
+        lo, hi, log_s, c2, rho = theta[shape_idx]
         if kind == "filament":
             u, cphi, G0 = _cached(cache, ("fil", fam, float(offset)),
                                   lambda: _filament_geometry(*_frames(h, wi, wr, alpha + offset), norm_sum))
             P, dP = _profile_derivatives(u, lo, hi, log_s, c2)  # (N,), (4, N)
-            Nl = _lobe_rho(cphi, rho)
+            Nl, dN_rho, _ = _lobe_with_derivatives(cphi, rho)
             S = P * Nl * G0
-            dS = np.concatenate([dP * (Nl * G0), (P * _lobe_rho_derivative(cphi, rho) * G0)[None]])  # (5, N)
+            dS = np.concatenate([dP * (Nl * G0), (P * dN_rho * G0)[None]])  # (5, N)
         else:
-            psi = t(f"{fam}_psi")
-            shape_cols.append(idx[f"{fam}_psi"])
-            entry = _staple_cached(cache, fam, alpha, float(offset), float(psi), h, wi, wr, norm_sum)
-            G, cphi, dG, dcphi = (a[0] for a in (entry.G, entry.cphi, *entry.derivatives()))  # (N, U) each
+            entry = _staple_cached(cache, fam, alpha, float(offset), float(theta[psi_col]), h, wi, wr, norm_sum)
+            # the products below at the valid nodes only, 0 at the others (as over the whole grid)
+            G, cphi, (dG, dcphi) = entry.G_k, entry.cphi_k, entry.derivatives_k()
             P, dP = _profile_derivatives(_U_NODES, lo, hi, log_s, c2)  # (U,), (4, U)
-            Nl = _lobe_rho(cphi, rho)
+            Nl, dN_rho, dN_cos = _lobe_with_derivatives(cphi, rho)
             NG = Nl * G
+            grid = np.zeros((3, N * _U_NODES.size))
+            grid[0, entry.k] = NG
+            grid[1, entry.k] = dN_rho * G
+            grid[2, entry.k] = dN_cos * dcphi * G + Nl * dG
+            NG, RG, dpsi = (a.reshape(N, _U_NODES.size) for a in grid)  # (N, U) each
             S = NG @ P * _DU
-            dS_psi = (_lobe_cos_derivative(cphi, rho) * dcphi * G + Nl * dG) @ P
-            dS = np.concatenate([(NG @ dP.T).T, ((_lobe_rho_derivative(cphi, rho) * G) @ P)[None],
-                                 dS_psi[None]]) * _DU
-        ks = np.exp(theta[[idx[f"{fam}_log_ks_{c}"] for c in range(C)]])  # (C,)
+            dS_psi = dpsi @ P
+            dS = np.concatenate([(NG @ dP.T).T, (RG @ P)[None], dS_psi[None]]) * _DU
+        ks = np.exp(theta[ks_cols])  # (C,)
         part = S[:, None] * ks  # (N, C)
         spec_sum += part
-        J[:, chans, [idx[f"{fam}_log_ks_{c}"] for c in range(C)]] = Phi[:, None] * part
+        J[:, chans, ks_cols] = Phi[:, None] * part
         J[:, :, shape_cols] = (Phi * dS).T[:, None, :] * ks[None, :, None]
     f += Phi[:, None] * spec_sum
     if spec.free_theta_d:
@@ -679,6 +790,10 @@ class _Data:
     has_sigma: bool
     cache: dict = field(default_factory=dict)
 
+    def __post_init__(self):
+        #: ln(y + ε) of the log residual: fixed for the fit, formed once
+        self.log_y = np.log(np.maximum(self.y, 0) + self.eps)
+
 
 def _prepare(m, rows=None) -> _Data:
     wi, wr, y = m.wi, m.wr, m.values
@@ -704,7 +819,7 @@ def _prepare(m, rows=None) -> _Data:
 def _residuals_batch(spec, thetas, d: _Data):
     f = evaluate_batch(spec, thetas, d.wi, d.wr, d.cache)
     f = np.where(np.isfinite(f), f, 0.0)
-    r = (np.log(np.maximum(f, 0) + d.eps) - np.log(np.maximum(d.y, 0) + d.eps)) / d.sigma
+    r = (np.log(np.maximum(f, 0) + d.eps) - d.log_y) / d.sigma
     return r.reshape(r.shape[0], -1)
 
 
@@ -717,7 +832,7 @@ def _residual_jacobian(spec, x, d: _Data):
     ok = np.isfinite(f) & (f > 0)
     f = np.where(np.isfinite(f), f, 0.0)
     fe = np.maximum(f, 0) + d.eps
-    r = (np.log(fe) - np.log(np.maximum(d.y, 0) + d.eps)) / d.sigma
+    r = (np.log(fe) - d.log_y) / d.sigma
     g = np.where(ok, 1.0 / (fe * d.sigma), 0.0)
     return r.reshape(-1), (J * g[..., None]).reshape(r.size, -1)
 
