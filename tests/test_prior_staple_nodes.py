@@ -145,6 +145,12 @@ GOLDEN_COST = 0.013420770368412353
 #: a libm/BLAS that rounds differently.  A change of the arithmetic shows far above it: a
 #: 1-ulp change of the data moved these values by up to 1.8 % (docs/decisions.md).
 GOLDEN_RTOL = 1e-12
+#: The build the golden values were fitted on.  numpy and SciPy are not pinned, so CI may
+#: install newer ones whose arithmetic or solver steps differ by rounding; there the test
+#: checks the fit's quality instead: values and cost within REBUILD_RTOL, above the 1.8 %
+#: a 1-ulp change moved them and far below what a broken geometry gives.
+GOLDEN_BUILD = {"numpy": "2.4.6", "scipy": "1.17.1"}
+REBUILD_RTOL = 0.05
 
 
 def test_staple_fit_equals_the_fit_before():
@@ -158,5 +164,9 @@ def test_staple_fit_equals_the_fit_before():
     m = Measurement.in_plane(psi, ti, tr, y)
     prior = fit_prior(m, kinds=("staple", "staple"))
     golden = evaluate_batch(spec, np.array(GOLDEN_THETA)[None], m.wi, m.wr)[0]
-    np.testing.assert_allclose(prior(m.wi, m.wr), golden, rtol=GOLDEN_RTOL, atol=0)
-    assert prior.report["variants"]["staple/staple"]["cost"] == pytest.approx(GOLDEN_COST, rel=GOLDEN_RTOL)
+    import scipy
+
+    same_build = GOLDEN_BUILD == {"numpy": np.__version__, "scipy": scipy.__version__}
+    rtol = GOLDEN_RTOL if same_build else REBUILD_RTOL
+    np.testing.assert_allclose(prior(m.wi, m.wr), golden, rtol=rtol, atol=0)
+    assert prior.report["variants"]["staple/staple"]["cost"] == pytest.approx(GOLDEN_COST, rel=rtol)
