@@ -135,14 +135,14 @@ def sections_html(model=None, measurement=None, reference=None, plan=None, basel
     comparison = ((getattr(model, "diagnostics", None) or {}).get("fit_report") or {}).get("comparison")
     body = comparison_table_html(comparison) + baselines_html(baselines)
     caption = ("Fig. 6 with uncertainty: the model, the truth, log10(model/truth) and σ of ln f "
-               "(prior-based kinds: fit noise ⊕ spread between candidates, docs/prior.md §5; kes: noise ⊕ "
+               "(prior-based kinds: fit noise ⊕ spread between candidates, docs/prior.md §5; kes, kes-halfdiff: noise ⊕ "
                "interpolation error over orientation ⊕ distance off the measured slice, docs/models.md)")
     if model is not None and has_uncertainty(model):
         body += "<h3>Uncertainty</h3>" + _img(figure_uncertainty(model, reference), "6-uncertainty", caption, dpi)
     elif model is not None:
         body += (f'<p class="note">The model (kind {html.escape(str(model.kind))}) carries no σ: '
-                 "its file holds no noise or interpolation-error estimate (a kes file written before 2026-12-03, "
-                 "a kes-halfdiff table or a baseline)"
+                 "its file holds no noise or interpolation-error estimate (a kes or kes-halfdiff file written "
+                 "before 2026-12-03, or a baseline)"
                  + ("; the fibre-prior model below shows one." if prior_model is not None else ".") + "</p>")
     if prior_model is not None and prior_model is not model:
         body += ("<h3>Prior-based model (fibre prior × KES residual)</h3>"
