@@ -34,7 +34,7 @@ def figure_uncertainty(model, reference=None, lights_deg=LIGHTS_DEG, n: int = 81
     Fig. 6 builder draws only the KES kinds).  σ is
     :func:`kesbrdf.validate.uncertainty.predict_sigma` (prior-based kinds: fit noise ⊕ spread to
     the pure prior and the stored KES table ⊕ distance from the measured data, docs/prior.md §5;
-    kes: eq. K1 of :mod:`kesbrdf.models.kes_sigma`).
+    kes: eq. K1 of :mod:`kesbrdf.models.kes_sigma`; kes-halfdiff: the same, :mod:`kesbrdf.models.halfdiff_sigma`).
     Equal-area disks, x = warp, y = weft; pixels outside are blank.
     """
     from kesbrdf.geometry import spherical_to_cartesian
