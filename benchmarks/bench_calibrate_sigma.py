@@ -43,7 +43,17 @@ before, only the fibre-prior references carry a σ (kes: none, counted in
 ``without_sigma_before``); after, the kes references carry eq. K1 with the scales fitted
 without their family.  Both kinds' scales are the leave-one-family-out ones.
 
-Alone:  python benchmarks/bench_calibrate_sigma.py  (prints JSON).
+σ of ``kes-halfdiff`` models (``kes_halfdiff`` section; eq. K1 with the coordinates of
+:mod:`kesbrdf.models.halfdiff_sigma`, docs/decisions.md "σ of kes-halfdiff models"): every
+reference is measured with the dense protocol (6°, 2 % noise, same seed), the
+``kes-halfdiff`` kind is fitted (saved and loaded), and the held-out orientations are
+scored on the dense geometry (225 pairs each) with both hemispheres.  (a, q, b₀, b₁) are
+chosen on ``GRID_HALFDIFF`` by the same objective and floor, leave-one-family-out, then
+on all families (frozen in ``HALFDIFF_SIGMA_SCALES``); ``default_lofo`` gives the
+coverage over the references whose default model on that measurement is kes-halfdiff.
+
+Alone:  python benchmarks/bench_calibrate_sigma.py  (prints JSON);
+        python benchmarks/bench_calibrate_sigma.py halfdiff  (the kes_halfdiff section only).
 """
 
 from __future__ import annotations
@@ -75,6 +85,7 @@ from kesbrdf.models.fibre_prior import (OFF_SUPPORT_SCALE, SIGMA_SCALES, FibrePr
 from kesbrdf.validate.compare import HELD_OUT_DEG, HEMISPHERE_LIGHTS_DEG, hemisphere_directions  # noqa: E402
 from kesbrdf.validate.uncertainty import COVERAGE_BANDS  # noqa: E402
 from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, combine, sigma_inputs  # noqa: E402
+from kesbrdf.models.halfdiff_sigma import HALFDIFF_SIGMA_SCALES  # noqa: E402
 
 NOISE = 0.02
 SEED = 3
@@ -98,11 +109,16 @@ GRID_AFTER = [(a, q, b, c) for a in (0.25, 0.5, 0.75, 1.0, 1.5, 2.0, 3.0) for q 
 GRID_KES = [(a, q, b, c) for a in (0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0) for q in (0.5, 1.0, 1.5)
             for b in (0.0, 0.1, 0.2, 0.3, 0.5, 0.75, 1.0, 1.5) for c in (0.0, 0.25, 0.5, 1.0, 1.5, 2.0, 3.0)]
 KES_KEYS = ("azimuth", "azimuth_power", "slice", "slice_misfit")
+#: Candidate (a, q, b₀, b₁) of eq. K1 for kes-halfdiff: a from 0.25 to 6, GRID_KES's q, and
+#: b₀, b₁ to 4 and 6 (on GRID_KES the choice sat on its largest b₀ and b₁ and smallest a).
+GRID_HALFDIFF = [(a, q, b, c) for a in (0.25, 0.5, 1.0, 1.5, 2.0, 3.0, 4.0, 6.0) for q in (0.5, 1.0, 1.5)
+                 for b in (0.0, 0.3, 0.75, 1.5, 2.0, 3.0, 4.0) for c in (0.0, 0.5, 1.0, 2.0, 3.0, 4.5, 6.0)]
 
 
-def truth_sets(ref):
-    """[(case, wi, wr, truth)]: the held-out orientations and the two Fig. 6 hemispheres."""
-    held = measure(ref, orientations_deg=HELD_OUT_DEG)
+def truth_sets(ref, protocol: str = "paper"):
+    """[(case, wi, wr, truth)]: the held-out orientations (the ``protocol``'s geometry) and
+    the two Fig. 6 hemispheres."""
+    held = measure(ref, protocol=protocol, orientations_deg=HELD_OUT_DEG)
     wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
     wr = wr.reshape(-1, 3)
     sets = [("held_out", held.wi, held.wr, held.values)]
@@ -119,17 +135,18 @@ def log_error(f, truth) -> np.ndarray:
     return np.abs(np.log(np.maximum(truth, 0) + eps) - np.log(np.maximum(f, 0) + eps))
 
 
-def kes_cases(ref, tmp: Path) -> dict:
-    """{case: ingredients of eq. K1} of the ``kes`` kind fitted to the paper measurement
-    (the one of :func:`cases`), through its model file, plus ``"default"``: the kind
-    ``kesbrdf.fit`` keeps on that measurement."""
+def table_cases(ref, tmp: Path, kind: str = "kes", protocol: str = "paper", default: bool = True) -> dict:
+    """{case: ingredients of eq. K1} of the ``kind`` table (``kes`` or ``kes-halfdiff``)
+    fitted to the ``protocol`` measurement (the one of :func:`cases`), through its model
+    file, plus ``"default"``: the kind ``kesbrdf.fit`` keeps on that measurement (when
+    ``default``)."""
     import kesbrdf
 
-    m = measure(ref, protocol="paper", noise=NOISE, noise_floor=1e-4, rng=SEED)
-    kind_class("kes").fit_measurement(m).save(tmp / "k.kes.json")
+    m = measure(ref, protocol=protocol, noise=NOISE, noise_floor=1e-4, rng=SEED)
+    kind_class(kind).fit_measurement(m).save(tmp / "k.kes.json")
     model = load(tmp / "k.kes.json")
-    out = {"default": kesbrdf.fit(m)[0].kind}
-    for tag, wi, wr_, truth in truth_sets(ref):
+    out = {"default": kesbrdf.fit(m)[0].kind if default else None}
+    for tag, wi, wr_, truth in truth_sets(ref, protocol):
         out[tag] = {"r": log_error(model.evaluate(wi, wr_), truth), "parts": sigma_inputs(model, wi, wr_)}
     return out
 
@@ -235,24 +252,58 @@ def default_lofo(fams, kes_fams, names, prior_params, kes_params) -> dict:
     return out
 
 
+def table_section(tab_fams, names, frozen_scales: dict, grid=GRID_KES):
+    """(result, LOFO parameters) of eq. K1 on the table fits ``tab_fams`` ({family:
+    [table_cases]}): the coverage of each family left out, the scales on all families,
+    and the coverage at ``frozen_scales`` per family and per reference."""
+    fam_names = list(tab_fams)
+    table = loss_table(tab_fams, "kes", grid)
+    params = lofo_params(fam_names, table, grid)
+    frozen = tuple(frozen_scales[k] for k in KES_KEYS)
+    result = {"lofo": {fam: {"params": [float(v) for v in params[fam]],
+                             "coverage": family_coverage(tab_fams[fam], "kes", params[fam]),
+                             "in_bands": in_bands(family_coverage(tab_fams[fam], "kes", params[fam]))}
+                       for fam in fam_names},
+              "params_all_families": [float(v) for v in grid[int(np.argmin(table.mean(axis=1)))]],
+              "frozen": dict(frozen_scales),
+              "coverage_frozen": {fam: family_coverage(rows, "kes", frozen) for fam, rows in tab_fams.items()},
+              "coverage_frozen_references": {f"{fam}/{n}": family_coverage([kc], "kes", frozen)
+                                             for fam, rows in tab_fams.items() for n, kc in zip(names[fam], rows)}}
+    result["families_in_bands_lofo"] = sum(r["in_bands"] for r in result["lofo"].values())
+    return result, params
+
+
 def run_kes(fams, kes_fams, names, prior_params) -> dict:
     """The kes section (module docstring): LOFO coverage of eq. K1 on every reference's
     kes fit, the scales on all families, and the default model's coverage."""
-    fam_names = list(kes_fams)
-    table = loss_table(kes_fams, "kes", GRID_KES)
-    params = lofo_params(fam_names, table, GRID_KES)
-    frozen = tuple(KES_SIGMA_SCALES[k] for k in KES_KEYS)
-    result = {"lofo": {fam: {"params": [float(v) for v in params[fam]],
-                             "coverage": family_coverage(kes_fams[fam], "kes", params[fam]),
-                             "in_bands": in_bands(family_coverage(kes_fams[fam], "kes", params[fam]))}
-                       for fam in fam_names},
-              "params_all_families": [float(v) for v in GRID_KES[int(np.argmin(table.mean(axis=1)))]],
-              "frozen": dict(KES_SIGMA_SCALES),
-              "coverage_frozen": {fam: family_coverage(rows, "kes", frozen) for fam, rows in kes_fams.items()},
-              "coverage_frozen_references": {f"{fam}/{n}": family_coverage([kc], "kes", frozen)
-                                             for fam, rows in kes_fams.items() for n, kc in zip(names[fam], rows)}}
-    result["families_in_bands_lofo"] = sum(r["in_bands"] for r in result["lofo"].values())
+    result, params = table_section(kes_fams, names, KES_SIGMA_SCALES)
     result["default_lofo"] = default_lofo(fams, kes_fams, names, prior_params, params)
+    return result
+
+
+def run_halfdiff(default: bool = True) -> dict:
+    """The kes_halfdiff section (module docstring): eq. K1 with the kes-halfdiff
+    coordinates on every reference's kes-halfdiff fit of the dense measurement (6°),
+    scored on the held-out orientations (dense geometry) and both hemispheres, LOFO;
+    ``default_lofo``: the same coverage over the references whose default model on the
+    dense measurement is kes-halfdiff (the others keep fibre-coord's σ,
+    ``dense_fibre_coord_frozen``)."""
+    hd_fams, names = {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for fam, refs in references().items():
+            if refs:
+                hd_fams[fam] = [table_cases(ref, Path(tmp), "kes-halfdiff", "dense", default) for ref in refs.values()]
+                names[fam] = list(refs)
+                print(f"{fam}: {len(refs)} references (kes-halfdiff)", file=sys.stderr)
+    result, params = table_section(hd_fams, names, HALFDIFF_SIGMA_SCALES, GRID_HALFDIFF)
+    result["protocol"] = "dense"
+    result["default_lofo"] = {}
+    for fam, rows in hd_fams.items():
+        kinds = [rc["default"] for rc in rows]
+        kept = [rc for rc, k in zip(rows, kinds) if k == "kes-halfdiff"]
+        result["default_lofo"][fam] = {
+            "default_kinds": dict(zip(names[fam], kinds)),
+            "after": mean_coverage([family_coverage([rc], "kes", params[fam]) for rc in kept])}
     return result
 
 
@@ -262,7 +313,7 @@ def run(dense: bool = True) -> dict:
         for fam, refs in references().items():
             if refs:
                 fams[fam] = [cases(ref, Path(tmp)) for ref in refs.values()]
-                kes_fams[fam] = [kes_cases(ref, Path(tmp)) for ref in refs.values()]
+                kes_fams[fam] = [table_cases(ref, Path(tmp)) for ref in refs.values()]
                 names[fam] = list(refs)
                 print(f"{fam}: {len(refs)} references", file=sys.stderr)
     result = {"noise": NOISE, "seed": SEED, "hemi_step_deg": HEMI_STEP_DEG, "bands": [list(BAND1), list(BAND2)],
@@ -293,6 +344,7 @@ def run(dense: bool = True) -> dict:
         f"{fam}/{name}": family_coverage([ref_cases], "after", frozen)
         for fam, rows in fams.items() for name, ref_cases in zip(names[fam], rows)}
     result["kes"] = run_kes(fams, kes_fams, names, lofo_params(fam_names, tables["after"][1], GRID_AFTER))
+    result["kes_halfdiff"] = run_halfdiff()
     if not dense:
         return result
     # the dense protocol's default (fibre-coord) with the same scales: reported, not fitted
@@ -308,4 +360,5 @@ def run(dense: bool = True) -> dict:
 
 
 if __name__ == "__main__":  # pragma: no cover
-    print(json.dumps(run(), indent=1))
+    # ``halfdiff``: the kes_halfdiff section alone
+    print(json.dumps(run_halfdiff() if sys.argv[1:] == ["halfdiff"] else run(), indent=1))

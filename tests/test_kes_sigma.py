@@ -2,21 +2,19 @@
 
 from __future__ import annotations
 
-import json
-
 import numpy as np
 import pytest
 
-from kesbrdf.errors import ModelError
 from kesbrdf.geometry import in_plane_directions, spherical_to_cartesian
-from kesbrdf.io.model_file import load_model as load
 from kesbrdf.measure.gonio import measure
 from kesbrdf.models.base import kind_class
-from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, azimuth_gap, predict_kes_sigma
+from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, azimuth_gap
 from kesbrdf.references.ashikhmin_shirley import AshikhminShirley
 from kesbrdf.references.ward import AnisotropicWard
-from kesbrdf.validate.compare import HELD_OUT_DEG, hemisphere_directions
-from kesbrdf.validate.uncertainty import coverage, predict_sigma, within_bands
+from kesbrdf.validate.uncertainty import within_bands
+from sigma_helpers import (assert_old_file_refuses, assert_round_trip, assert_scales_act_alone,
+                           assert_sigma_is_the_noise, family_coverage, fitted_family_rows,
+                           load_with_sigma_field, saved)
 
 NOISE, SEED = 0.02, 3
 WARD = AnisotropicWard(0.25, 0.08, [0.2, 0.15, 0.1], 0.1)
@@ -28,10 +26,7 @@ def _fit_kes(ref):
 
 @pytest.fixture(scope="module")
 def ward_file(tmp_path_factory):
-    d = tmp_path_factory.mktemp("kes_sigma")
-    model = _fit_kes(WARD)
-    model.save(d / "k.kes.json")
-    return model, d / "k.kes.json"
+    return saved(_fit_kes(WARD), tmp_path_factory.mktemp("kes_sigma"))
 
 
 def _pairs():
@@ -45,40 +40,19 @@ def _pairs():
 def test_sigma_round_trips_bit_identically(ward_file):
     """The σ summary and every σ it gives are the same to the bit after save and load."""
     model, path = ward_file
-    again = load(path)
-    assert again.has_sigma and again.sigma == model.sigma
-    wi, wr = _pairs()
-    for a, b in zip(model.predict_sigma(wi, wr), again.predict_sigma(wi, wr)):
-        assert np.array_equal(a, b)
-    # and a second save writes the same document
-    again.save(path.with_name("k2.kes.json"))
-    assert json.loads(path.read_text())["sigma"] == json.loads(path.with_name("k2.kes.json").read_text())["sigma"]
+    assert_round_trip(model, path, *_pairs())
 
 
 def test_old_file_without_sigma_loads_and_refuses(ward_file, tmp_path):
     model, path = ward_file
-    doc = json.loads(path.read_text())
-    del doc["sigma"]
-    old = tmp_path / "old.kes.json"
-    old.write_text(json.dumps(doc))
-    m = load(old)
-    assert not m.has_sigma and m.predict_sigma(*_pairs()) is None
-    np.testing.assert_array_equal(m.evaluate(*_pairs()), model.evaluate(*_pairs()))
-    with pytest.raises(ModelError) as exc:
-        predict_sigma(m, *_pairs(), source=str(old))
-    assert "carries no uncertainty" in str(exc.value) and "\n" not in str(exc.value)
+    assert_old_file_refuses(model, path, tmp_path, *_pairs())
 
 
 @pytest.mark.parametrize("field, value", [("noise", float("nan")), ("s_gamma", []), ("s", -1.0), ("support", None)])
 def test_bad_sigma_field_is_one_error(ward_file, tmp_path, field, value):
     _, path = ward_file
-    doc = json.loads(path.read_text())
-    doc["sigma"][field] = value
-    bad = tmp_path / "bad.kes.json"
-    bad.write_text(json.dumps(doc))
-    with pytest.raises(ModelError) as exc:
-        load(bad)
-    assert "\n" not in str(exc.value) and ("sigma" in str(exc.value) or "NaN" in str(exc.value) or "nan" in str(exc.value).lower())
+    msg = load_with_sigma_field(path, tmp_path, field, value)
+    assert "sigma" in msg or "nan" in msg.lower()
 
 
 def test_baselines_carry_no_sigma():
@@ -93,9 +67,7 @@ def test_sigma_is_the_noise_on_the_measured_samples(ward_file):
     noise floor's share on dark samples)."""
     model, _ = ward_file
     wi, wr = in_plane_directions(np.radians([0.0, 45.0, 90.0, 135.0]), np.radians([20.0] * 4), np.radians([70.0] * 4))
-    _, _, sl = model.predict_sigma(wi, wr)
-    assert np.allclose(sl, model.sigma["noise"])
-    assert NOISE <= model.sigma["noise"] <= 1.2 * NOISE
+    assert_sigma_is_the_noise(model, wi, wr, NOISE)
 
 
 def test_sigma_grows_between_orientations_and_off_the_slice(ward_file):
@@ -134,52 +106,22 @@ FAMILIES = {
 }
 
 
-def _truths(ref, hemispheres: bool):
-    held = measure(ref, orientations_deg=HELD_OUT_DEG)
-    out = [("held_out", held.wi, held.wr, held.values)]
-    if hemispheres:
-        wr, _, _ = hemisphere_directions(HEMI_STEP_DEG)
-        wr = wr.reshape(-1, 3)
-        for phi_i in (90.0, 45.0):
-            wi = np.broadcast_to(spherical_to_cartesian(np.radians(30.0), np.radians(phi_i)), wr.shape)
-            out.append((f"hemi{phi_i:g}", wi, wr, np.asarray(ref(wi, wr), float)))
-    return out
-
-
 @pytest.fixture(scope="module")
 def family_cases(tmp_path_factory):
     """{family: [(case, f, σ_ln f, truth)]} from saved-and-loaded kes files."""
-    d = tmp_path_factory.mktemp("kes_cov")
-    out = {}
-    for fam, refs in FAMILIES.items():
-        rows = []
-        for k, ref in enumerate(refs):
-            _fit_kes(ref).save(d / f"{fam}{k}.kes.json")
-            model = load(d / f"{fam}{k}.kes.json")
-            for case, wi, wr, truth in _truths(ref, fam == "ward"):
-                f, _, sl = predict_sigma(model, wi, wr)
-                rows.append((case, f, sl, truth))
-        out[fam] = rows
-    return out
-
-
-def _family_coverage(rows, factor=1.0) -> dict:
-    out = {}
-    for case in dict.fromkeys(c for c, *_ in rows):
-        cov = [coverage(f, factor * sl, t) for c, f, sl, t in rows if c == case]
-        out[case] = (np.mean([c["within_1sigma"] for c in cov]), np.mean([c["within_2sigma"] for c in cov]))
-    return out
+    return fitted_family_rows(tmp_path_factory.mktemp("kes_cov"), FAMILIES, _fit_kes, "paper",
+                              lambda fam: fam == "ward", HEMI_STEP_DEG)
 
 
 @pytest.mark.parametrize("family", list(FAMILIES))
 def test_held_out_orientations_inside_the_bands(family, family_cases):
-    c1, c2 = _family_coverage(family_cases[family])["held_out"]
+    c1, c2 = family_coverage(family_cases[family])["held_out"]
     assert within_bands(c1, c2, tol=FAMILY_BAND_TOL), (family, c1, c2)
 
 
 def test_ward_hemispheres_are_not_overconfident(family_cases):
     """The hemispheres are over-covered at 1σ (a recorded miss), never under-covered."""
-    cov = _family_coverage(family_cases["ward"])
+    cov = family_coverage(family_cases["ward"])
     for case in ("hemi90", "hemi45"):
         c1, c2 = cov[case]
         assert c1 >= 0.60 - FAMILY_BAND_TOL and c2 >= 0.90 - FAMILY_BAND_TOL, (case, c1, c2)
@@ -190,7 +132,7 @@ def test_rescaled_sigma_leaves_the_bands(factor, family_cases):
     """The band check can fail: σ halved or doubled takes a family's held-out orientations
     out of the bands."""
     for fam, rows in family_cases.items():
-        c1, c2 = _family_coverage(rows, factor)["held_out"]
+        c1, c2 = family_coverage(rows, factor)["held_out"]
         assert not within_bands(c1, c2, tol=FAMILY_BAND_TOL), (fam, factor, c1, c2)
 
 
@@ -201,9 +143,4 @@ def test_frozen_scales_are_the_calibrated_ones(ward_file):
     larger slice scale off the slice only."""
     assert KES_SIGMA_SCALES == {"azimuth": 1.0, "azimuth_power": 1.0, "slice": 0.3, "slice_misfit": 3.0}
     model, _ = ward_file
-    wi, wr = _pairs()
-    base = predict_kes_sigma(model, wi, wr)[2][:, 0]
-    wide_az = predict_kes_sigma(model, wi, wr, {"azimuth": 2.0})[2][:, 0]
-    wide_sl = predict_kes_sigma(model, wi, wr, {"slice": 0.6})[2][:, 0]
-    assert wide_az[1] > base[1] and np.allclose(wide_az[[0, 2]], base[[0, 2]])
-    assert np.all(wide_sl[3:] > base[3:]) and np.allclose(wide_sl[:3], base[:3])
+    assert_scales_act_alone(model, *_pairs(), between=[1], on_phi=[0, 2], off=[3, 4], on_slice=[0, 1, 2])

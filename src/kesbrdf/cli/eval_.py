@@ -21,9 +21,9 @@ def add_arguments(p):
                    help="direction mapping (default: the model kind's own, deviation for kes); "
                    "one the model's kind lacks is an error")
     p.add_argument("--uncertainty", action="store_true",
-                   help="add a sigma column per channel (1/sr): for kes, fibre-prior and fibre-coord models fitted by this version "
-                        "(docs/models.md, sigma of a kes model; docs/prior.md section 5); a kes-halfdiff table, a baseline "
-                        "or an older kes file refuses in one line")
+                   help="add a sigma column per channel (1/sr): for kes, kes-halfdiff, fibre-prior and fibre-coord models "
+                        "fitted by this version (docs/models.md, sigma of a kes model; docs/prior.md section 5); a "
+                        "baseline or an older kes or kes-halfdiff file refuses in one line")
 
 
 def run(args) -> int:

@@ -116,6 +116,9 @@ from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
 from kesbrdf.models.body import body_value
+from kesbrdf.models.halfdiff_sigma import HALFDIFF_SIGMA_SCALES, SUPPORT_KEYS, halfdiff_coordinates
+from kesbrdf.models.halfdiff_sigma import sigma_summary as halfdiff_sigma_summary
+from kesbrdf.models.kes_sigma import StoredSigma, check_summary
 from kesbrdf.models.mappings import EXTRAPOLATIONS, HALFDIFF, fade, foreshortening, in_plane_half_diff, to_half_diff
 from kesbrdf.measure.measurement import Measurement
 from kesbrdf.models.kes import (
@@ -166,7 +169,7 @@ _ARRAYS = ("phi_grid", "theta_h_grid", "theta_d_grid", "table", "body")
 
 @register
 @dataclass
-class HalfDiffModel(ReflectanceModel):
+class HalfDiffModel(StoredSigma, ReflectanceModel):
     """A fitted ``kes-halfdiff`` model (module docstring).
 
     Attributes
@@ -180,6 +183,9 @@ class HalfDiffModel(ReflectanceModel):
         Lobe quantity (``parameters["normalisation"]``), ≥ 0.
     body : ndarray (C,)
         Lambertian body term c, 1/sr.
+    sigma : dict or None
+        The numbers of its per-prediction σ (:mod:`kesbrdf.models.halfdiff_sigma`, eq. K1);
+        None for files written before it.
     """
 
     kind: ClassVar[str] = KIND
@@ -201,10 +207,18 @@ class HalfDiffModel(ReflectanceModel):
     diagnostics: dict = field(default_factory=dict)
     input_info: dict = field(default_factory=dict)
     kesbrdf_version: str = __version__
+    sigma: dict | None = None
+
+    #: (a, q, b₀, b₁) of its σ, eq. (K1) (:class:`kesbrdf.models.kes_sigma.StoredSigma`)
+    sigma_scales: ClassVar[dict] = HALFDIFF_SIGMA_SCALES
 
     @property
     def orientations(self) -> int:
         return int(self.parameters.get("orientations", 4))
+
+    def sigma_coordinates(self, wi, wr):
+        """(φ_h, 2θ_h, d_slice) of eq. (K1) (:func:`kesbrdf.models.halfdiff_sigma.halfdiff_coordinates`)."""
+        return halfdiff_coordinates(self, wi, wr)
 
     # -- kinds contract ---------------------------------------------------------
     def evaluate_unit(self, wi, wr, mapping: str) -> np.ndarray:
@@ -237,7 +251,8 @@ class HalfDiffModel(ReflectanceModel):
         return "kesbrdf_halfdiff", ({} if extrapolation is None else {"extrapolation": extrapolation})
 
     def to_payload(self):
-        return {}, {name: getattr(self, name) for name in _ARRAYS}
+        fields = {} if self.sigma is None else {"sigma": self.sigma}
+        return fields, {name: getattr(self, name) for name in _ARRAYS}
 
     @classmethod
     def from_payload(cls, fields: dict, arrays: dict, shared: dict, source=None) -> "HalfDiffModel":
@@ -274,12 +289,19 @@ class HalfDiffModel(ReflectanceModel):
                 raise ModelError(
                     f"{where(source)}parameters.{key}: expected one of {', '.join(valid)}, got {str(value)[:40]!r}"
                 )
-        return cls(**shared, **arr)
+        # absent in files written before it: no σ
+        sigma = None if fields.get("sigma") is None else check_summary(fields["sigma"], source, SUPPORT_KEYS)
+        return cls(**shared, **arr, sigma=sigma)
 
     @classmethod
     def fit_measurement(cls, measurement, **options) -> "HalfDiffModel":
         check_fit_options(cls.kind, cls.fit_options, options)
-        return fit_halfdiff(measurement, **options)
+        model = fit_halfdiff(measurement, **options)
+        try:
+            model.sigma = halfdiff_sigma_summary(measurement, model)
+        except KesbrdfError:  # e.g. a line with a repeated theta_i: no σ rather than no model
+            model.sigma = None
+        return model
 
     @classmethod
     def usable_rows(cls, measurement, orientations=None):

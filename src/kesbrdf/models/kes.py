@@ -53,6 +53,7 @@ from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
 from kesbrdf.models.body import body_value
+from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, StoredSigma, check_summary, kes_coordinates, sigma_summary
 from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
     MAPPINGS,
@@ -107,7 +108,7 @@ _ARRAYS = ("phi_grid", "gamma_grid", "table", "body", "gamma_nodes", "q_nodes")
 
 @register
 @dataclass
-class Model(ReflectanceModel):
+class Model(StoredSigma, ReflectanceModel):
     """A fitted extended-KES model, kind ``"kes"`` (module docstring, docs/formats.md).
 
     Attributes
@@ -241,19 +242,12 @@ class Model(ReflectanceModel):
     def has_table(self) -> bool:
         return True
 
-    @property
-    def has_sigma(self) -> bool:
-        """True when the file holds the σ summary (:mod:`kesbrdf.models.kes_sigma`)."""
-        return self.sigma is not None
+    #: (a, q, b₀, b₁) of its σ, eq. (K1) (:class:`kesbrdf.models.kes_sigma.StoredSigma`)
+    sigma_scales: ClassVar[dict] = KES_SIGMA_SCALES
 
-    def predict_sigma(self, wi, wr):
-        """``(f, σ, σ_ln f)`` of eq. (K1) (:func:`kesbrdf.models.kes_sigma.predict_kes_sigma`), or
-        None without the σ summary."""
-        if self.sigma is None:
-            return None
-        from kesbrdf.models.kes_sigma import predict_kes_sigma
-
-        return predict_kes_sigma(self, wi, wr)
+    def sigma_coordinates(self, wi, wr):
+        """(φ, γ, d_slice) of eq. (K1) (:func:`kesbrdf.models.kes_sigma.kes_coordinates`)."""
+        return kes_coordinates(self, wi, wr)
 
     def table_view(self, n_phi=None, n_gamma=None) -> "Model":
         """The model itself: its table is the (φ, γ) table."""
@@ -336,8 +330,6 @@ class Model(ReflectanceModel):
             raise ModelError(f"{where(source)}q_nodes: expected finite values or NaN (unmeasured), got inf")
         sigma = None
         if fields.get("sigma") is not None:  # absent in files written before it: no σ
-            from kesbrdf.models.kes_sigma import check_summary
-
             sigma = check_summary(fields["sigma"], source)
         return cls(**shared, **arr, sigma=sigma)
 
@@ -347,8 +339,6 @@ class Model(ReflectanceModel):
         check_fit_options(cls.kind, cls.fit_options, options)
         model = fit(measurement, **options)
         if model.parameters.get("interpolation") == "kes":  # the σ is calibrated for the KES form only
-            from kesbrdf.models.kes_sigma import sigma_summary
-
             try:
                 model.sigma = sigma_summary(measurement, model)
             except KesbrdfError:  # e.g. a line with a repeated theta_i: no σ rather than no model

@@ -34,7 +34,7 @@ def figure_uncertainty(model, reference=None, lights_deg=LIGHTS_DEG, n: int = 81
     Fig. 6 builder draws only the KES kinds).  σ is
     :func:`kesbrdf.validate.uncertainty.predict_sigma` (prior-based kinds: fit noise ⊕ spread to
     the pure prior and the stored KES table ⊕ distance from the measured data, docs/prior.md §5;
-    kes: eq. K1 of :mod:`kesbrdf.models.kes_sigma`).
+    kes: eq. K1 of :mod:`kesbrdf.models.kes_sigma`; kes-halfdiff: the same, :mod:`kesbrdf.models.halfdiff_sigma`).
     Equal-area disks, x = warp, y = weft; pixels outside are blank.
     """
     from kesbrdf.geometry import spherical_to_cartesian
@@ -135,14 +135,14 @@ def sections_html(model=None, measurement=None, reference=None, plan=None, basel
     comparison = ((getattr(model, "diagnostics", None) or {}).get("fit_report") or {}).get("comparison")
     body = comparison_table_html(comparison) + baselines_html(baselines)
     caption = ("Fig. 6 with uncertainty: the model, the truth, log10(model/truth) and σ of ln f "
-               "(prior-based kinds: fit noise ⊕ spread between candidates, docs/prior.md §5; kes: noise ⊕ "
+               "(prior-based kinds: fit noise ⊕ spread between candidates, docs/prior.md §5; kes, kes-halfdiff: noise ⊕ "
                "interpolation error over orientation ⊕ distance off the measured slice, docs/models.md)")
     if model is not None and has_uncertainty(model):
         body += "<h3>Uncertainty</h3>" + _img(figure_uncertainty(model, reference), "6-uncertainty", caption, dpi)
     elif model is not None:
         body += (f'<p class="note">The model (kind {html.escape(str(model.kind))}) carries no σ: '
-                 "its file holds no noise or interpolation-error estimate (a kes file written before 2026-12-03, "
-                 "a kes-halfdiff table or a baseline)"
+                 "its file holds no noise or interpolation-error estimate (a kes or kes-halfdiff file written "
+                 "before 2026-12-03, or a baseline)"
                  + ("; the fibre-prior model below shows one." if prior_model is not None else ".") + "</p>")
     if prior_model is not None and prior_model is not model:
         body += ("<h3>Prior-based model (fibre prior × KES residual)</h3>"

@@ -10,10 +10,12 @@ docs/prior.md §5).  ``fibre-coord`` (the dense default) inherits the same σ.  
 model fitted since 2026-12-03 carries the σ of eq. (K1)
 (:mod:`kesbrdf.models.kes_sigma`): the noise of its data, their own
 leave-one-orientation-out interpolation error over ψ as a function of γ, and the
-measured support, stored in its file (docs/decisions.md, "σ of kes models").  A
-``kes-halfdiff`` table, a baseline (nearest/linear) or a kes file written before has
-no noise estimate and no error estimate, so any σ computed from it alone would be
-invented: asking for one is a :class:`~kesbrdf.errors.ModelError` that says so.
+measured support, stored in its file (docs/decisions.md, "σ of kes models"); a
+``kes-halfdiff`` model fitted since then the same form over every incidence line of its
+dense data (:mod:`kesbrdf.models.halfdiff_sigma`, "σ of kes-halfdiff models").  A
+baseline (nearest/linear) or a kes or kes-halfdiff file written before has no noise
+estimate and no error estimate, so any σ computed from it alone would be invented:
+asking for one is a :class:`~kesbrdf.errors.ModelError` that says so.
 """
 
 from __future__ import annotations
@@ -38,7 +40,8 @@ def predict_sigma(model, wi, wr, source: str = "model"):
     r"""f_r and its σ at direction pairs (``model.predict_sigma``).
 
     For a ``kes`` model with its σ summary, eq. (K1) of :mod:`kesbrdf.models.kes_sigma`:
-    σ² = n² + (a s(γ)^q d_φ)² + ((b₀ + b₁ s̄) d_slice)².
+    σ² = n² + (a s(γ)^q d_φ)² + ((b₀ + b₁ s̄) d_slice)²; for a ``kes-halfdiff`` model the
+    same with its own coordinates and scales (:mod:`kesbrdf.models.halfdiff_sigma`).
 
     For the ``fibre-prior`` kind, σ of ln f combines the fit noise propagated through the
     Laplace covariance, the spread between the candidates (the model, its pure prior and
@@ -73,8 +76,8 @@ def predict_sigma(model, wi, wr, source: str = "model"):
     if result is None:
         raise ModelError(
             f"{source}: this {model.kind!r} model carries no uncertainty: it holds no noise or interpolation-error "
-            "estimate (a kes table written before 2026-12-03, one built with --interpolation other than kes, a "
-            "kes-halfdiff table or a baseline); refit it with kesbrdf fit (default interpolation) or --kind fibre-prior"
+            "estimate (a kes or kes-halfdiff table written before 2026-12-03, one built with --interpolation other "
+            "than kes, or a baseline); refit it with kesbrdf fit (default interpolation) or --kind fibre-prior"
         )
     return result
 
