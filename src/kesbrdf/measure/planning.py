@@ -29,10 +29,11 @@ Candidate sample groups (:func:`group_geometry`)
 :func:`plan` reports every protocol of :data:`PROTOCOLS` within the budget, then
 recommends additions to a base protocol by greedy selection: at each step it adds the
 candidate group that lowers the expected error most per sample, while the budget
-allows, and stops when no group helps by more than :data:`MIN_GAIN`.  Before stopping
-it tries pairs (:func:`pair_candidates`): a group whose samples share one difference
-angle (``specular:T``, ``oop:T``) cannot be held out alone by ``kesbrdf.fit``'s extras
-check, so it is never used alone and never helps alone; two of the same kind can be.
+allows, and stops when no group helps by more than :data:`MIN_GAIN`.  Pairs
+(:func:`pair_candidates`) compete with single groups at every step: a group whose
+samples share one difference angle (``specular:T``, ``oop:T``) cannot be held out alone
+by ``kesbrdf.fit``'s extras check, so it is never used alone and never helps alone; two
+of the same kind can be.
 
 With a fitted model as the truth the planner can only tell how well each protocol pins
 the model's own shape, not what the model got wrong: that needs a reference.
@@ -512,7 +513,7 @@ def plan(truths: dict, budget: int = 200, protocols=None, candidates=CANDIDATE_G
         return best if best is not None and best[2] < current * (1.0 - MIN_GAIN) else None
 
     while remaining:
-        best = best_of([(c,) for c in remaining]) or best_of(pair_candidates(remaining))
+        best = best_of([(c,) for c in remaining] + pair_candidates(remaining))
         if best is None:
             break
         _, option, err, extra = best
