@@ -87,15 +87,16 @@ def test_kes_albedo_stays_below_the_tables_own_bound(fits, family):
 
 
 def test_files_without_the_new_parameters_evaluate_as_before(tmp_path, random_pairs):
-    """A model file written before the fix (no ``normalisation``/``extrapolation``) keeps
-    its meaning: q/√(cos θ_i cos θ_r) with the last γ column held, as it was fitted."""
+    """A model file written before the fix (no ``normalisation``/``extrapolation``/``mapping``)
+    keeps its meaning: q/√(cos θ_i cos θ_r) with the last γ column held, read with the
+    deviation mapping, as it was fitted."""
     from kesbrdf.models.mappings import to_phi_gamma
     from kesbrdf.io.model_file import load_model as load
 
     legacy = kesbrdf.fit(measure(make_reference("ward")), kind="kes", normalisation="sqrtcos", extrapolation="hold")[0]
-    del legacy.parameters["normalisation"], legacy.parameters["extrapolation"]
+    del legacy.parameters["normalisation"], legacy.parameters["extrapolation"], legacy.parameters["mapping"]
     old = load(legacy.save(tmp_path / "old.kes.json"))
-    assert (old.normalisation, old.extrapolation) == ("sqrtcos", "hold")
+    assert (old.normalisation, old.extrapolation, old.default_mapping) == ("sqrtcos", "hold", "deviation")
     wi, wr = random_pairs
     expected = old.body + old.lookup_unit(*to_phi_gamma(wi, wr)) / np.sqrt(wi[:, 2] * wr[:, 2])[:, None]
     np.testing.assert_allclose(old.evaluate(wi, wr), expected, rtol=1e-12)

@@ -77,7 +77,7 @@ def _held_out(model, test):
 @pytest.fixture(scope="module")
 def kes_truth():
     """A deviation-mapping KES model built by kesbrdf.models.kes.fit from an anisotropic Ward."""
-    return fit(measure(AnisotropicWard(0.15, 0.4, rho_d=0.4, rho_s=0.15)), fallback="log")
+    return fit(measure(AnisotropicWard(0.15, 0.4, rho_d=0.4, rho_s=0.15)), fallback="log", mapping="deviation")
 
 
 @pytest.fixture(scope="module")

@@ -71,7 +71,9 @@ def test_file_layout(tmp_path, kes_model):
     for section in ("::begin parameters", "::end parameters", "::begin shader", "::end shader"):
         assert text.count(section) == 1
     params = text.split("::begin parameters")[1].split("::end parameters")[0].split("\n")
-    assert "float scale 0 4 1" in params and "bool halfvector 0" in params and "color tint 1 1 1" in params
+    # the shader's default mapping is the model's own (conftest's model: deviation)
+    flag = 1 if kes_model.default_mapping == "halfvector" else 0
+    assert "float scale 0 4 1" in params and f"bool halfvector {flag}" in params and "color tint 1 1 1" in params
     assert "vec3 BRDF(vec3 L, vec3 V, vec3 N, vec3 X, vec3 Y)" in text
     assert res.agreement["table"]["entries_per_channel"] <= be.MAX_TABLE_ENTRIES
     assert res.size == (tmp_path / "fabric.brdf").stat().st_size
@@ -101,6 +103,24 @@ def test_numpy_port_at_full_resolution_equals_kesbrdf_evaluate(any_model, rng, m
     port = be.numpy_port(table, d_gamma, be._body3(any_model), wi, wr, halfvector=mapping == "halfvector", **be.lobe_parameters(any_model))
     ref = evaluate(any_model, wi, wr, mapping)
     np.testing.assert_allclose(port, ref, rtol=PORT_REL_TOL)
+
+
+def test_the_shaders_default_mapping_is_the_models_own(tmp_path):
+    """A new fit records the half-vector mapping: the exported shader defaults to it, and
+    the downsampling check reads both sides with it (it compared a half-vector model with
+    the deviation shader before, p90 error 0.21)."""
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
+    from kesbrdf.references.ward import AnisotropicWard
+
+    m = measure(AnisotropicWard(0.1, 0.25, rho_d=[0.3, 0.2, 0.1], rho_s=0.08))
+    for mapping, flag in (("halfvector", 1), ("deviation", 0)):
+        model = fit(m, mapping=mapping)
+        text, _ = be.brdf_explorer_source(model)
+        assert f"bool halfvector {flag}\n" in text
+        n_phi, n_gamma = be._default_grid(model)
+        err = be.downsampling_error(model, n_phi, n_gamma)
+        assert err["p90_rel"] < DOWNSAMPLE_P90_TOL and err["max_rel"] < DOWNSAMPLE_MAX_TOL, (mapping, err)
 
 
 def test_default_table_downsampling_error_is_bounded(kes_model):

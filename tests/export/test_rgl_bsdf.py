@@ -142,7 +142,7 @@ def test_mitsuba_eval_agrees_with_the_model(model, plugin, rng):
 
     w_view, w_light = _dirs(rng, N_PAIRS), _dirs(rng, N_PAIRS)
     got = _lum(eval_plugin(plugin, w_view, w_light))
-    want = _lum(evaluate(model, w_light, w_view, "deviation") * w_light[:, 2:3])
+    want = _lum(evaluate(model, w_light, w_view) * w_light[:, 2:3])
     rel = np.abs(got - want) / want
     assert np.median(rel) < MEDIAN_BOUND, np.median(rel)
     assert np.percentile(rel, 90) < P90_BOUND, np.percentile(rel, 90)
@@ -160,7 +160,7 @@ def test_node_incidence_isolates_the_table_interpolation(model, exported, plugin
     w_view = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1)
     w_light = _dirs(rng, N_PAIRS)
     got = _lum(eval_plugin(plugin, w_view, w_light))
-    want = _lum(evaluate(model, w_light, w_view, "deviation") * w_light[:, 2:3])
+    want = _lum(evaluate(model, w_light, w_view) * w_light[:, 2:3])
     assert np.median(np.abs(got - want) / want) < NODE_MEDIAN_BOUND
 
 
@@ -182,7 +182,7 @@ def test_mitsuba_sampling_weights_match_the_albedo(model, plugin):
     for theta_deg in (20.0, 45.0, 70.0):
         t = np.radians(theta_deg)
         wv = np.array([np.sin(t) * np.cos(0.7), np.sin(t) * np.sin(0.7), np.cos(t)])
-        albedo = _lum(np.einsum("n,nc->c", wq, evaluate(model, wl, wv[None, :], "deviation")))
+        albedo = _lum(np.einsum("n,nc->c", wq, evaluate(model, wl, wv[None, :])))
         with _Variant(mi):
             si = dr.zeros(mi.SurfaceInteraction3f, n)
             si.wi = mi.Vector3f(*[float(c) for c in wv])
@@ -230,7 +230,7 @@ def test_model_vndf_option_loads_agrees_and_samples_unbiased(model, tmp_path, rn
     bsdf = load_plugin({"type": "measured", "filename": str(path)})
     w_view, w_light = _dirs(rng, N_PAIRS), _dirs(rng, N_PAIRS)
     got = _lum(eval_plugin(bsdf, w_view, w_light))
-    want = _lum(evaluate(model, w_light, w_view, "deviation") * w_light[:, 2:3])
+    want = _lum(evaluate(model, w_light, w_view) * w_light[:, 2:3])
     rel = np.abs(got - want) / want
     assert np.median(rel) < MEDIAN_BOUND and np.percentile(rel, 90) < P90_BOUND
     mi, dr = import_mitsuba("test")
@@ -251,5 +251,5 @@ def test_model_vndf_option_loads_agrees_and_samples_unbiased(model, tmp_path, rn
     T, P = np.meshgrid(th, ph, indexing="ij")
     wl = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
     wq = ((w * np.pi / 4 * np.sin(th) * np.cos(th))[:, None] * np.full(128, 2 * np.pi / 128)).ravel()
-    albedo = _lum(np.einsum("n,nc->c", wq, evaluate(model, wl, wv[None, :], "deviation")))
+    albedo = _lum(np.einsum("n,nc->c", wq, evaluate(model, wl, wv[None, :])))
     assert mean == pytest.approx(albedo, rel=SAMPLING_BOUND)

@@ -53,18 +53,20 @@ def test_compare_render_writes_panel_and_numbers(render_module, tmp_path):
     assert 0.0 <= r["flip"] <= 1.0
 
 
-def test_dense_protocol_model_is_closer_than_paper_on_ward(render_module):
-    """More of the hemisphere measured (900 in-plane pairs vs 116) renders closer to Ward.
+def test_dense_protocol_model_is_no_worse_than_paper_on_ward(render_module):
+    """More of the hemisphere measured (900 in-plane pairs vs 116) never renders Ward worse.
 
-    Measured at 160x120/64 spp: relative RMSE 0.18 (paper) vs 0.03 (dense, below the
-    noise floor of 0.08); the margin asserted here is far inside that gap.
+    Since the paper protocol's table is read with the half-vector mapping (a Ward lobe is a
+    function of h) both are at this size's Monte-Carlo noise: relative RMSE 0.121 (paper)
+    and 0.123 (dense) at 64x48/32 spp, where the deviation reading gave 0.18.  The bound
+    allows the noise's spread (~0.1 relative RMSE, module docstring) on the dense side only.
     """
     from kesbrdf.render.compare import compare_render
 
     paper = compare_render("satin-ward", "paper", "sphere", _opts(), noise_floor=False, models=("kes",))
     dense = compare_render("satin-ward", "dense", "sphere", _opts(), noise_floor=False, models=("kes",))
     assert dense["model_kind"] == "kes-halfdiff"
-    assert dense["rel_rmse"] < 0.8 * paper["rel_rmse"], (dense["rel_rmse"], paper["rel_rmse"])
+    assert dense["rel_rmse"] < 1.1 * paper["rel_rmse"], (dense["rel_rmse"], paper["rel_rmse"])
 
 
 def test_halfdiff_plugin_agrees_with_numpy(render_module, rng, tmp_path):

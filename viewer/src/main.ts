@@ -78,6 +78,11 @@ function setModel(doc: any, name: string, measDoc: any): void {
   const previous = state.model;
   state.model = model;
   state.measurement = measurement;
+  if (previous !== model) {
+    // a new model is shown with the mapping its table was fitted for (the select can change it)
+    state.mapping = model.mapping;
+    $<HTMLSelectElement>('mapping').value = model.mapping;
+  }
   state.reference =
     referenceFromMetadata(measurement?.metadata) ??
     referenceFromMetadata((doc.input ?? {}) as Record<string, string>);

@@ -43,6 +43,8 @@ export interface KesModel {
   normalisation: Normalisation;
   /** parameters.extrapolation; absent: 'hold' */
   extrapolation: Extrapolation;
+  /** parameters.mapping, the mapping the table was fitted for; absent (files written before it): 'deviation' */
+  mapping: Mapping;
   /**
    * λ of w = max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)): BOUNDED_LAMBDA for
    * 'bounded', 0 for 'sqrtcos' (w is then the geometric mean); uniform kesLambda.
@@ -126,6 +128,10 @@ export function parseModel(doc: any, name: string): KesModel {
   const params = doc.parameters ?? {};
   const normalisation = params.normalisation ?? 'sqrtcos';
   const extrapolation = params.extrapolation ?? 'hold';
+  const mapping = params.mapping ?? 'deviation';
+  if (mapping !== 'deviation' && mapping !== 'halfvector') {
+    throw new Error(`${name}: parameters.mapping: expected deviation or halfvector, got ${JSON.stringify(mapping)?.slice(0, 40)}`);
+  }
   if (!NORMALISATIONS.includes(normalisation)) {
     throw new Error(`${name}: parameters.normalisation: expected one of ${NORMALISATIONS.join(', ')}, got ${JSON.stringify(normalisation)?.slice(0, 40)}`);
   }
@@ -151,6 +157,7 @@ export function parseModel(doc: any, name: string): KesModel {
     gammaMax: gamma.data[nGamma - 1],
     normalisation,
     extrapolation,
+    mapping,
     lambda: normalisation === 'bounded' ? BOUNDED_LAMBDA : 0,
     fadeSlope: extrapolation === 'fade' ? 1 / FADE_WIDTH : 0,
     lineSum,

@@ -177,6 +177,13 @@ async function main() {
       assert(await page.isHidden('#error'), `error shown: ${await page.textContent('#error')}`);
     });
 
+    await test('the mapping starts at the one the model records (parameters.mapping)', async () => {
+      const recorded = JSON.parse(fs.readFileSync(modelPath, 'utf-8')).parameters?.mapping ?? 'deviation';
+      assert(recorded === 'halfvector', `a new kes fit records mapping halfvector, got ${recorded}`);
+      const shown = await page.evaluate(() => document.getElementById('mapping').value);
+      assert(shown === recorded, `mapping select shows ${shown}, the model records ${recorded}`);
+    });
+
     await test('every view renders non-blank', () => checkViews('view'));
 
     await test('every view renders for every mapping (deviation, halfvector, paper)', async () => {

@@ -88,7 +88,7 @@ def step_params(step: str, options: dict, settings: dict | None = None) -> dict:
         return {k: o.get(k) for k in ("reference", "reference_params", "mapping", "fallback")}
     if step == "report":
         return {"reference": o.get("reference"), "reference_params": o.get("reference_params"),
-                "mapping": o.get("mapping") or "deviation"}
+                "mapping": o.get("mapping")}  # None: the model's own
     if step == "export":
         from kesbrdf.export import FORMATS
 
@@ -260,7 +260,7 @@ def step_report(inputs: dict, params: dict, out: Path) -> dict:
     m = _read_m(inputs)
     fitted = _fitted(inputs)
     ref = make_fabric_reference(params.get("reference"), params.get("reference_params"))
-    mapping = params.get("mapping") or "deviation"
+    mapping = params.get("mapping")  # None: the model's own (kes: the mapping it records)
     metrics = json.loads(Path(inputs["validate/validation.json"]).read_text())
     sample = (getattr(fitted.model, "input_info", None) or {}).get("sample") or m.metadata.get("sample") or "fabric"
     opts = {name: {"mapping": mapping} for name in ("3a", "3b", "4", "6")}

@@ -68,8 +68,9 @@ def add_render_options(p, spp: int = 64, resolution: str = "480x360") -> None:
     p.add_argument("--denoise", action="store_true",
                    help="denoise with Intel Open Image Denoise using albedo and normal AOVs (pyoidn)")
     p.add_argument("--lobe-tint", default=None, metavar="R,G,B", help="tint of the measured lobe (default 1,1,1)")
-    p.add_argument("--mapping", choices=("deviation", "halfvector"), default="deviation",
-                   help="(phi, gamma) mapping (docs/formats.md); 'paper' is not renderable")
+    p.add_argument("--mapping", choices=("deviation", "halfvector"), default=None,
+                   help="(phi, gamma) mapping of a kes table (docs/formats.md); default: the one the model "
+                        "records (halfvector for new fits); 'paper' is not renderable")
     p.add_argument("--one-sided", action="store_true", help="shade back faces black (default: two-sided cloth)")
     p.add_argument("--exposure", default="0", metavar="STOPS|card",
                    help="exposure of PNG/JPEG output: stops (default 0), or 'card': metered once on an 18%% grey "

@@ -218,8 +218,7 @@ def brdf_explorer_source(model, n_phi: int | None = None, n_gamma: int | None = 
         )
     lobe = lobe_parameters(model)
     table, d_gamma = resample_table(model, n_phi, n_gamma)
-    mapping = model.parameters.get("mapping", "deviation") if isinstance(getattr(model, "parameters", None), dict) else "deviation"
-    halfvector = 1 if mapping == "halfvector" else 0
+    halfvector = 1 if _halfvector(model) else 0
     info = {
         "n_phi": n_phi, "n_gamma": n_gamma, "d_phi_deg": 360.0 / n_phi, "d_gamma_deg": math.degrees(d_gamma),
         "entries_per_channel": n_phi * n_gamma, "normalisation": lobe["normalisation"], "extrapolation": lobe["extrapolation"],
@@ -245,8 +244,15 @@ color tint 1 1 1
     return text, info
 
 
+def _halfvector(model) -> bool:
+    """Whether the table is read with the half-vector mapping: the model's own
+    (``default_mapping``; ``deviation`` for a file that records none)."""
+    return getattr(model, "default_mapping", "deviation") == "halfvector"
+
+
 def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, seed: int = 20261201, max_theta_deg: float = 80.0) -> dict:
-    """Relative error of the resampled table's f_r against the full model at random pairs."""
+    """Relative error of the resampled table's f_r against the full model at random pairs
+    (both read with the model's own mapping, the shader's default)."""
     from kesbrdf.models.brdf import evaluate
 
     table, d_gamma = resample_table(model, n_phi, n_gamma)
@@ -263,7 +269,7 @@ def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, see
     ref = evaluate(model, wi, wr)
     if ref.shape[-1] == 1:
         ref = np.repeat(ref, 3, axis=-1)
-    approx = numpy_port(table, d_gamma, _body3(model), wi, wr, **lobe_parameters(model))
+    approx = numpy_port(table, d_gamma, _body3(model), wi, wr, halfvector=_halfvector(model), **lobe_parameters(model))
     rel = np.abs(approx - ref) / np.maximum(np.abs(ref), 1e-12)
     return {
         "median_rel": float(np.median(rel)),

@@ -147,10 +147,11 @@ def _measured_bsdf(bsdf_name: str) -> str:
 """
 
 
-def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, mapping: str = "deviation",
+def export(model, out, *, width: int = 320, height: int = 240, spp: int = 64, mapping: str | None = None,
            measured: bool = True, check: bool = True, **bsdf_options) -> ExportResult:
     """Write ``out`` (kesbrdf plugin scene), the model file, and (``measured``) the
-    ``measured`` scene with its ``.bsdf``; ``bsdf_options`` go to :mod:`~kesbrdf.export.rgl_bsdf`."""
+    ``measured`` scene with its ``.bsdf``; ``bsdf_options`` go to :mod:`~kesbrdf.export.rgl_bsdf`.
+    ``mapping``: the KES mapping of a table (default: the model's own, ``default_mapping``)."""
     from kesbrdf._atomic import write_text
     from kesbrdf.errors import ExportError
 

@@ -2,13 +2,15 @@ r"""From a model to a BRDF f_r(wi, wr) (paper eq. 3–4, docs/method.md, "From t
 
 :func:`evaluate` works for every model kind (:mod:`kesbrdf.models.base`): it asks the
 model, which checks the mapping it was given against the ones its kind supports and
-evaluates through :func:`kesbrdf.models.mappings.evaluate_pairs`.  For the ``kes`` kind:
+evaluates through :func:`kesbrdf.models.mappings.evaluate_pairs`.  For the ``kes`` kind (the default is the mapping the model records, ``parameters["mapping"]``:
+``halfvector`` for new fits, ``deviation`` for files that record none):
 
-``deviation`` (default)
+``halfvector``
+    γ = 2 θ_h and φ = φ_h of the half vector (Ward- and microfacet-like; a fibre's
+    highlight, where h ⟂ t, is a function of h too).
+``deviation``
     γ = angle between wr and the mirror image of wi, m = (−x, −y, z);
     φ = azimuth of (wi + wr) projected on the fabric plane.
-``halfvector``
-    γ = 2 θ_h and φ = φ_h of the half vector (Ward- and microfacet-like).
 ``paper``
     Eq. 3–4 taken literally (see :func:`kesbrdf.models.mappings.paper_phi_gamma`).
 
@@ -70,7 +72,8 @@ def evaluate(model, wi, wr, mapping: str | None = None) -> np.ndarray:
     wi, wr : array_like, shape (..., 3)
         Directions toward the light and the viewer, fabric frame; normalised here.
     mapping : str, optional
-        One of ``model.mappings``; default the kind's first (``deviation`` for ``kes``).
+        One of ``model.mappings``; default the model's ``default_mapping`` (for ``kes`` the
+        mapping it records: ``halfvector`` for new fits, ``deviation`` for older files).
         A mapping the kind does not support is a one-line
         :class:`~kesbrdf.errors.ModelError`.
 

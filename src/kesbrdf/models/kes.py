@@ -56,7 +56,9 @@ from kesbrdf.models.body import body_value
 from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, StoredSigma, check_summary, kes_coordinates, sigma_summary
 from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
+    FIT_MAPPING,
     MAPPINGS,
+    TABLE_MAPPINGS,
     NORMALISATIONS,
     PAPER_MIN_SIN_BETA,
     fade,
@@ -135,7 +137,7 @@ class Model(StoredSigma, ReflectanceModel):
     auto_compare: ClassVar[str | None] = "loo"
     fit_options: ClassVar[tuple[str, ...]] = (
         "orientations", "fallback", "body", "noise_floor", "interpolation", "n_phi", "gamma_step",
-        "normalisation", "extrapolation",
+        "normalisation", "extrapolation", "mapping",
     )
 
     channels: tuple[str, ...]
@@ -172,6 +174,15 @@ class Model(StoredSigma, ReflectanceModel):
         """The lobe beyond γ_max, :data:`kesbrdf.models.mappings.EXTRAPOLATIONS`: ``fade``, or
         ``hold`` for files written before it."""
         return str(self.parameters.get("extrapolation", "hold"))
+
+    @property
+    def default_mapping(self) -> str:
+        """The mapping the table was fitted for, ``parameters["mapping"]``: ``halfvector``
+        for new fits (:data:`kesbrdf.models.mappings.FIT_MAPPING`), ``deviation`` for files
+        that record none (written before it).  Every consumer that is not told a mapping
+        evaluates, renders and exports with this one."""
+        recorded = self.parameters.get("mapping") if isinstance(self.parameters, dict) else None
+        return recorded if recorded in MAPPINGS else MAPPINGS[0]
 
     @property
     def line_sum(self) -> float:
@@ -465,6 +476,7 @@ def fit(
     gamma_step=None,
     normalisation: str = "bounded",
     extrapolation: str = "fade",
+    mapping: str = FIT_MAPPING,
 ) -> Model:
     """Build the extended-KES model from in-plane measurements.
 
@@ -494,6 +506,11 @@ def fit(
         ``sqrtcos`` is eq. 3 literally, whose lobe gains energy toward grazing incidence.
     extrapolation : {"fade", "hold"}
         The lobe beyond the last measured deviation (:data:`kesbrdf.models.mappings.EXTRAPOLATIONS`).
+    mapping : {"halfvector", "deviation"}
+        How a direction pair reads the table off the plane of incidence, recorded in
+        ``parameters["mapping"]`` and used by every consumer not told otherwise
+        (:attr:`Model.default_mapping`).  In the plane both give the same (φ, γ), so the
+        table and the round trip do not depend on it.
 
     Returns
     -------
@@ -511,6 +528,8 @@ def fit(
         raise KESError(f"unknown normalisation {normalisation!r}; expected one of {', '.join(NORMALISATIONS)}")
     if extrapolation not in EXTRAPOLATIONS:
         raise KESError(f"unknown extrapolation {extrapolation!r}; expected one of {', '.join(EXTRAPOLATIONS)}")
+    if mapping not in TABLE_MAPPINGS:
+        raise KESError(f"unknown mapping {mapping!r} for a fit; expected one of {', '.join(TABLE_MAPPINGS)}")
     orientations, psis, at, line_sum = _kes_rows(m, orientations)
     C = m.n_channels
 
@@ -616,6 +635,7 @@ def fit(
             "n_phi": n_phi,
             "normalisation": normalisation,
             "extrapolation": extrapolation,
+            "mapping": mapping,
         },
         diagnostics=diagnostics,
         input_info=m.input_info(),

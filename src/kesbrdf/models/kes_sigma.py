@@ -185,10 +185,12 @@ def azimuth_gap(phi, orientations: int) -> np.ndarray:
 
 
 def kes_coordinates(model, wi, wr):
-    """(φ, γ, d_slice) of eq. (K1) for a kes table: the deviation azimuth and deviation
-    (:func:`kesbrdf.models.mappings.to_phi_gamma`) and the distance off the measured slice
-    (:func:`kesbrdf.models.support.support_distance_parts`)."""
-    phi, gamma = to_phi_gamma(wi, wr, "deviation")
+    """(φ, γ, d_slice) of eq. (K1) for a kes table: (φ, γ) in the mapping the table is read
+    with (its ``default_mapping``: the half-vector azimuth and 2θ_h for new fits, the
+    deviation azimuth and deviation for older files; :func:`kesbrdf.models.mappings.to_phi_gamma`)
+    and the distance off the measured slice (:func:`kesbrdf.models.support.support_distance_parts`)."""
+    mapping = getattr(model, "default_mapping", "deviation")
+    phi, gamma = to_phi_gamma(wi, wr, mapping if mapping in ("deviation", "halfvector") else "deviation")
     d_slice, _ = support_distance_parts(model.sigma["support"], wi, wr)
     return phi, gamma, d_slice
 

@@ -64,6 +64,8 @@ from kesbrdf.errors import KesbrdfError
 
 __all__ = [
     "MAPPINGS",
+    "TABLE_MAPPINGS",
+    "FIT_MAPPING",
     "HALFDIFF",
     "NORMALISATIONS",
     "BOUNDED_LAMBDA",
@@ -86,8 +88,16 @@ __all__ = [
     "evaluate_pairs",
 ]
 
-#: Mappings of the ``kes`` table (first = default).
+#: Mappings of the ``kes`` table (first = the default of files that record none).
 MAPPINGS = ("deviation", "halfvector", "paper")
+#: The mappings a table can be fitted for and rendered with (``paper`` is eq. 3–4 as
+#: printed: an evaluation only, singular and not reciprocal).
+TABLE_MAPPINGS = ("deviation", "halfvector")
+#: The mapping new ``kes`` fits record (``parameters["mapping"]``) and are evaluated
+#: with unless told otherwise: the half vector's azimuth and 2θ_h, which is where a
+#: microfacet lobe and a fibre's highlight (h ⟂ t) live (docs/decisions.md, "The half-vector
+#: mapping is the default of new fits").  Files that record no mapping are ``deviation``.
+FIT_MAPPING = "halfvector"
 #: The mapping of the ``kes-halfdiff`` kind.
 HALFDIFF = "halfdiff"
 

@@ -175,12 +175,13 @@ def tabulate(model, n_phi: int | None = None, n_gamma: int | None = None):
 
     Returns the keyword fields of a model of the ``kes`` kind (the table format; its
     class builds the model, :meth:`kesbrdf.models.kes.Model.tabulate`), whose
-    ``parameters`` record ``tabulated_from`` (the source kind) and whose evaluation
-    equals ``model``'s at the grid nodes of the paper's incidence line.  This module
+    ``parameters`` record ``tabulated_from`` (the source kind) and the mapping it is read
+    with off the line (:data:`kesbrdf.models.mappings.FIT_MAPPING`, as a new kes fit), and
+    whose evaluation equals ``model``'s at the grid nodes of the paper's incidence line.  This module
     imports no kind, so the kinds can borrow from it without an import loop.
     """
     from kesbrdf.geometry import in_plane_directions
-    from kesbrdf.models.mappings import line_foreshortening
+    from kesbrdf.models.mappings import FIT_MAPPING, line_foreshortening
 
     n_phi = TABLE_N_PHI if n_phi is None else int(n_phi)
     n_gamma = TABLE_N_GAMMA if n_gamma is None else int(n_gamma)
@@ -214,6 +215,7 @@ def tabulate(model, n_phi: int | None = None, n_gamma: int | None = None):
             "n_phi": n_phi,
             "normalisation": "bounded",
             "extrapolation": "fade",
+            "mapping": FIT_MAPPING,
             "tabulated_from": model.kind,
         },
         diagnostics={"incidence_line_deg": 90.0, "warnings": []},

@@ -108,7 +108,7 @@ def _fig3_data(model, measurement, channel, mapping, n_gamma):
     return measured, psi_deg, curve, label
 
 
-def figure_3a(model=None, measurement=None, reference=None, *, channel=None, mapping="deviation",
+def figure_3a(model=None, measurement=None, reference=None, *, channel=None, mapping=None,
               n_gamma: int = 169, logy: bool = False, figsize=(7.0, 4.6)):
     """Paper Fig. 3a: q against signed γ per orientation, measured points and model curves.
 
@@ -150,7 +150,7 @@ def figure_3a(model=None, measurement=None, reference=None, *, channel=None, map
                                              mapping=mapping, psi_deg=psi_deg, logy=logy))
 
 
-def figure_3b(model=None, measurement=None, reference=None, *, channel=None, mapping="deviation",
+def figure_3b(model=None, measurement=None, reference=None, *, channel=None, mapping=None,
               n_gamma: int = 85, n_psi: int = 37, figsize=(7.0, 5.6)):
     """Paper Fig. 3b: the 3-D view, measured lines over the model surface q(ψ, γ).
 
@@ -315,7 +315,7 @@ def figure_6(model=None, measurement=None, reference=None, *, lights_deg=((30.0,
         ``reference``, ``difference`` (n, n) and ``measured`` (u, v, f_r, model) or None.
     """
     if model is not None:
-        mapping = model.check_mapping(mapping)  # None: the kind's own (deviation for kes)
+        mapping = model.check_mapping(mapping)  # None: the model's own (for kes the mapping it records)
     from kesbrdf.models import brdf
     from kesbrdf.geometry import spherical_to_cartesian
 

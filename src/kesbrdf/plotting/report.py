@@ -648,7 +648,7 @@ def collect(model, measurement=None, reference=None, mapping: str | None = None)
     fit_kwargs = {"fallback": model.parameters.get("fallback", "log")} if model is not None else {}
     if model is not None:
         mapping = model.check_mapping(mapping)
-    kes_mapping = mapping if mapping in ("deviation", "halfvector", "paper") else "deviation"
+    kes_mapping = mapping if mapping in ("deviation", "halfvector", "paper") else None  # None: each fit's own
     metrics: dict = {}
 
     def attempt(key, fn, *args, **kwargs):

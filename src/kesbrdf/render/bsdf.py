@@ -30,7 +30,9 @@ Parameters (scene description)
 filename : str
     A model file (``*.kes.json``, kind ``kes``).
 mapping : str
-    ``deviation`` (default) or ``halfvector``.  ``paper`` is rejected: eq. 3–4 taken
+    ``halfvector`` or ``deviation``; default: the one the model records (its
+    ``default_mapping``: ``halfvector`` for new fits, ``deviation`` for files that record
+    none).  ``paper`` is rejected: eq. 3–4 taken
     literally is singular (sin β → 0, grazing angles), not reciprocal, and has no
     lobe around the mirror direction to sample; use it through :mod:`kesbrdf.models.brdf`.
 base_color : "r,g,b" or list of 3 floats, optional
@@ -117,25 +119,25 @@ def model_rgb(model, source=None):
     )
 
 
-def check_model(path, mapping: str = "deviation"):
+def check_model(path, mapping: str | None = None):
     """Load and check a model for the renderer before Mitsuba sees it.
 
     Errors raised inside a plugin constructor reach Python as Mitsuba's RuntimeError
     with a traceback; checking first gives the CLI a one-line ModelError.  Every kind is
     accepted: ``model.render_plugin()`` says which plugin draws it and whether it takes
-    ``mapping`` (the KES mapping of the ``kesbrdf`` table plugin).
+    ``mapping`` (the KES mapping of the ``kesbrdf`` table plugin; None: the model's own).
     """
     from kesbrdf.io.model_file import load_model as load
 
     path = Path(path)
     if not path.is_file():
         raise FileNotFoundError(2, "No such file or directory", str(path))
-    if mapping not in MAPPINGS:
+    if mapping is not None and mapping not in MAPPINGS:
         raise ModelError(f"unknown mapping {mapping!r}; the renderer supports {', '.join(MAPPINGS)}")
     model = load(path)
     if model.n_channels not in (1, 3):
         raise ModelError(f"{where(path)}the renderer needs a model with 1 (grey) or 3 (RGB) channels, got {model.n_channels}")
-    plugin, _ = model.render_plugin(mapping=None if mapping == "deviation" else mapping)
+    plugin, _ = model.render_plugin(mapping=mapping)
     if plugin == "kesbrdf":  # the table plugin: the (φ, γ) view must exist before Mitsuba asks
         model_rgb(model, path)
     return model
@@ -305,7 +307,9 @@ class KesBSDF(FabricBSDF):
             path = Path(str(mi.file_resolver().resolve(str(filename))))
         model = load(path).table_view()  # any kind: its (φ, γ) table or its tabulated view
         self.filename = str(path)
-        mapping = str(_prop(props, "mapping", "deviation"))
+        # default: the mapping the table was fitted for (halfvector for new fits, deviation
+        # for files that record none), as every other consumer reads it
+        mapping = str(_prop(props, "mapping", model.default_mapping))
         if mapping == "paper":
             raise ModelError(
                 f"kesbrdf BSDF mapping: expected one of {', '.join(MAPPINGS)}, got 'paper' ('paper' is "

@@ -135,7 +135,7 @@ def tile_means(sheet_path, n: int, columns: int = 4) -> np.ndarray:
     return np.array([a[(k // columns) * h:(k // columns + 1) * h - (LABEL_BAR if h >= 8 * LABEL_BAR else 16), (k % columns) * w:(k % columns + 1) * w].reshape(-1, 3).mean(0) for k in range(n)])
 
 
-def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation") -> dict:
+def colourway_values(model_path, colourways, wi, wr, mapping: str | None = None) -> dict:
     """f_r of each colourway through the ``kesbrdf`` plugin, split into body and lobe.
 
     Parameters
@@ -143,6 +143,8 @@ def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation")
     colourways : list of (name, rgb or None)
     wi, wr : ndarray (N, 3)
         Light and viewer directions in the fabric frame (upper hemisphere).
+    mapping : str, optional
+        The plugin's KES mapping; default the model's own.
 
     Returns
     -------
@@ -161,7 +163,7 @@ def colourway_values(model_path, colourways, wi, wr, mapping: str = "deviation")
     wr = np.asarray(wr, float)
     out = {}
     for name, rgb in colourways:
-        d = {"type": "kesbrdf", "filename": str(model_path), "mapping": mapping}
+        d = {"type": "kesbrdf", "filename": str(model_path), **({} if mapping is None else {"mapping": mapping})}
         if rgb is not None:
             d["base_color"] = ",".join(f"{float(c):.9g}" for c in rgb)
         bsdf = _load_dict(d)

@@ -89,7 +89,9 @@ class RenderOptions:
     env: str = "studio"
     base_color: tuple | None = None
     lobe_tint: tuple | None = None
-    mapping: str = "deviation"
+    #: the KES mapping of the ``kesbrdf`` table plugin; None: the model's own
+    #: (``default_mapping``: ``halfvector`` for new fits, ``deviation`` for older files)
+    mapping: str | None = None
     two_sided: bool = True
     sampling: str = "lobe"
     max_depth: int = 4
@@ -233,8 +235,7 @@ def bsdf_dict(model_path, opts: RenderOptions, model=None) -> dict:
         from kesbrdf.io.model_file import load_model
 
         model = load_model(Path(model_path))
-    plugin, props = model.render_plugin(
-        mapping=None if opts.mapping == "deviation" else opts.mapping, extrapolation=opts.extrapolation)
+    plugin, props = model.render_plugin(mapping=opts.mapping, extrapolation=opts.extrapolation)
     d = {
         "type": plugin,
         "filename": str(model_path),
