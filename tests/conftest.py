@@ -141,6 +141,11 @@ def model_files(tmp_path_factory):
     out["aniso"] = _fit_and_save(root / "aniso.kes.json", AnisotropicWard(0.06, 0.35, rho_d=0.05, rho_s=0.15))
     # grey, albedo below one everywhere: for the white furnace
     out["furnace"] = _fit_and_save(root / "furnace.kes.json", AnisotropicWard(0.15, 0.3, rho_d=0.5, rho_s=0.2))
+    # RGB over a Fresnel-weighted body (GGX reference): the table carries a body law (eq. B3)
+    from kesbrdf.references.ggx import AnisotropicGGX
+
+    out["law"] = _fit_and_save(root / "law.kes.json", AnisotropicGGX(0.15, 0.3, eta=1.5, rho_d=[0.5, 0.3, 0.2], k_s=0.6))
+    assert out["law"][1].body_law is not None
     return out
 
 

@@ -37,13 +37,28 @@ DOWNSAMPLE_P90_TOL = 0.005
 DOWNSAMPLE_MAX_TOL = 0.05
 
 
-@pytest.fixture(params=["current", "legacy"])
-def any_model(request, kes_model):
-    """The test fabric as fitted now, and as a file without ``normalisation`` /
-    ``extrapolation`` reads (the same table, evaluated the old way)."""
+@pytest.fixture(scope="module")
+def law_model():
+    """A table over a Fresnel-like body (GGX reference; eq. B3 of kesbrdf.models.body)."""
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
+    from kesbrdf.references.ggx import AnisotropicGGX
+
+    model = fit(measure(AnisotropicGGX(0.15, 0.3, eta=1.5, rho_d=[0.5, 0.3, 0.2], k_s=0.6)))
+    assert model.body_law is not None
+    return model
+
+
+@pytest.fixture(params=["current", "legacy", "body-law"])
+def any_model(request, kes_model, law_model):
+    """The test fabric as fitted now, as a file without ``normalisation`` /
+    ``extrapolation`` reads (the same table, evaluated the old way), and a table over a
+    Fresnel-like body."""
     if request.param == "current":
         assert (kes_model.normalisation, kes_model.extrapolation) == ("bounded", "fade")
         return kes_model
+    if request.param == "body-law":
+        return law_model
     params = {k: v for k, v in kes_model.parameters.items() if k not in ("normalisation", "extrapolation")}
     legacy = dataclasses.replace(kes_model, parameters=params)
     assert (legacy.normalisation, legacy.extrapolation) == ("sqrtcos", "hold")

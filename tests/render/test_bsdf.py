@@ -46,6 +46,19 @@ def test_eval_agrees_with_numpy(render_module, model_files, rng, mapping):
     np.testing.assert_allclose(got, want, rtol=EVAL_RTOL, atol=0)
 
 
+def test_body_law_eval_agrees_with_numpy_and_keeps_its_shape_in_a_colourway(render_module, model_files, rng):
+    """A table over a Fresnel-like body c g(cos θ_i) g(cos θ_r) (kesbrdf.models.body, eq. B3):
+    the plugin evaluates the law as numpy does; a base colour replaces c and keeps g."""
+    path, model = model_files["law"]
+    wi, wr = _pairs(rng)
+    np.testing.assert_allclose(_eval(_load(path), wi, wr), evaluate(model, wi, wr) * wi[:, 2:3], rtol=EVAL_RTOL, atol=0)
+    shape = model.body_law(wi[:, 2], wr[:, 2])[:, None]
+    base = np.array([0.8, 0.1, 0.3])
+    lobe = evaluate(model, wi, wr) - model.body * shape
+    want = (base / math.pi * shape + lobe) * wi[:, 2:3]
+    np.testing.assert_allclose(_eval(_load(path, base_color="0.8,0.1,0.3"), wi, wr), want, rtol=EVAL_RTOL, atol=1e-7)
+
+
 def test_grey_model_is_grey(render_module, model_files, rng):
     path, model = model_files["aniso"]
     wi, wr = _pairs(rng, 500)

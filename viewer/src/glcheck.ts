@@ -94,6 +94,8 @@ export function evalPairsGL(
   gl.uniform1f(gl.getUniformLocation(prog, 'kesLineSum'), model.lineSum);
   gl.uniform1i(gl.getUniformLocation(prog, 'kesMapping'), MAPPING_CODE[mapping]);
   gl.uniform3fv(gl.getUniformLocation(prog, 'kesBody'), body ?? t.body);
+  gl.uniform1f(gl.getUniformLocation(prog, 'kesBodyA'), model.bodyLaw[0]);
+  gl.uniform1f(gl.getUniformLocation(prog, 'kesBodyP'), model.bodyLaw[1]);
 
   const target = gl.createTexture()!;
   gl.activeTexture(gl.TEXTURE3);

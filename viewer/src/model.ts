@@ -56,8 +56,10 @@ export interface KesModel {
   lineSum: number;
   /** (nPhi, nGamma, C) lobe q, C-order */
   table: Float64Array;
-  /** (C,) Lambertian body term, 1/sr */
+  /** (C,) body term c, 1/sr */
   body: Float64Array;
+  /** the body's shape g(μ) = 1 − a(1 − μ)^p, body c·g(cos θ_i)·g(cos θ_r) (doc.body_law; absent: [0, 1], Lambertian) */
+  bodyLaw: [number, number];
   /** (nNodes,) measured |γ|, radians */
   gammaNodes: Float64Array;
   /** (nNodes, 8, C) measured q at half-azimuths k·45° */
@@ -129,6 +131,11 @@ export function parseModel(doc: any, name: string): KesModel {
   const normalisation = params.normalisation ?? 'sqrtcos';
   const extrapolation = params.extrapolation ?? 'hold';
   const mapping = params.mapping ?? 'deviation';
+  const law = doc.body_law ?? { a: 0, p: 1 };
+  const bodyLaw: [number, number] = [Number(law.a), Number(law.p)];
+  if (!(bodyLaw[0] >= 0 && bodyLaw[0] <= 1 && bodyLaw[1] > 0 && bodyLaw[1] <= 64)) {
+    throw new Error(`${name}: body_law: expected a in [0, 1] and p in (0, 64], got ${JSON.stringify(law)?.slice(0, 60)}`);
+  }
   if (mapping !== 'deviation' && mapping !== 'halfvector') {
     throw new Error(`${name}: parameters.mapping: expected deviation or halfvector, got ${JSON.stringify(mapping)?.slice(0, 40)}`);
   }
@@ -163,6 +170,7 @@ export function parseModel(doc: any, name: string): KesModel {
     lineSum,
     table: table.data,
     body: body.data,
+    bodyLaw,
     gammaNodes,
     qNodes,
     doc,
@@ -306,6 +314,14 @@ const PAPER_MIN_SIN_BETA = 1e-6;
  * body·√(cos γ / 2) (the measured quantity on the θ_i + θ_r = 90° line) with
  * φ = π/2 − (φ_i + φ_r) (+π when γ = θ_r − θ_i < 0), divided by √(cos θ_i cos θ_r)·sin β.
  */
+/** g(cos θ_i)·g(cos θ_r) of the body (kesbrdf.models.body.BodyLaw); 1 for a Lambertian body. */
+export function bodyShape(m: KesModel, cosI: number, cosR: number): number {
+  const [a, p] = m.bodyLaw;
+  if (a === 0) return 1;
+  const g = (mu: number) => 1 - a * Math.pow(Math.min(Math.max(1 - mu, 0), 1), p);
+  return g(cosI) * g(cosR);
+}
+
 function paperEvaluate(m: KesModel, wi: Vec3, wr: Vec3, out: Float64Array, body: ArrayLike<number>): Float64Array {
   const thetaI = Math.atan2(Math.hypot(wi[0], wi[1]), wi[2]);
   const thetaR = Math.atan2(Math.hypot(wr[0], wr[1]), wr[2]);
@@ -319,14 +335,15 @@ function paperEvaluate(m: KesModel, wi: Vec3, wr: Vec3, out: Float64Array, body:
   const sinBeta = Math.max(Math.sin(2 * Math.asin(sinHalfBeta)), PAPER_MIN_SIN_BETA);
   lookup(m, phi, Math.abs(gamma), out);
   const ratio = lineRatio(m, gamma);
-  const bodyScale = Math.sqrt(Math.max(Math.cos(gamma), 0) / 2);
+  const g = Math.abs(gamma);
+  const bodyScale = Math.sqrt(Math.max(Math.cos(gamma), 0) / 2) * bodyShape(m, Math.cos((m.lineSum - g) / 2), Math.cos((m.lineSum + g) / 2));
   const norm = 1 / (Math.sqrt(wi[2] * wr[2]) * sinBeta);
   for (let k = 0; k < m.nChannels; k++) out[k] = (out[k] * ratio + body[Math.min(k, body.length - 1)] * bodyScale) * norm;
   return out;
 }
 
 /**
- * f_r = c + fade(γ)·q/w (1/sr) of the model for one pair, per channel (docs/formats.md steps 1–3).
+ * f_r = c·g(cos θ_i)·g(cos θ_r) + fade(γ)·q/w (1/sr) of the model for one pair, per channel (docs/formats.md steps 1–3).
  * `body` replaces the model's body term when given (colourways: docs/method.md, "Colour").
  */
 export function evaluate(
@@ -345,7 +362,8 @@ export function evaluate(
   const [phi, gamma] = toPhiGamma(wi, wr, mapping);
   lookup(m, phi, gamma, out);
   const norm = fade(m, gamma) / foreshortening(m, wi[2], wr[2]);
-  for (let c = 0; c < m.nChannels; c++) out[c] = (body ? body[Math.min(c, body.length - 1)] : m.body[c]) + out[c] * norm;
+  const shape = bodyShape(m, wi[2], wr[2]);
+  for (let c = 0; c < m.nChannels; c++) out[c] = (body ? body[Math.min(c, body.length - 1)] : m.body[c]) * shape + out[c] * norm;
   return out;
 }
 

@@ -154,6 +154,8 @@ export class Preview {
         kesFadeSlope: { value: 0 },
         kesLineSum: { value: Math.PI / 2 },
         kesBody: { value: new THREE.Vector3() },
+        kesBodyA: { value: 0 },
+        kesBodyP: { value: 1 },
         kesMapping: { value: 0 },
         lightDir: { value: new THREE.Vector3(0, 0.5, 0.866) },
         exposure: { value: 1 },
@@ -184,6 +186,8 @@ export class Preview {
     u.kesGammaMax.value = m.gammaMax;
     u.kesFadeSlope.value = m.fadeSlope;
     u.kesLineSum.value = m.lineSum;
+    u.kesBodyA.value = m.bodyLaw[0];
+    u.kesBodyP.value = m.bodyLaw[1];
     this.updateBody();
   }
 

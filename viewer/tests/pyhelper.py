@@ -94,8 +94,9 @@ def _arr(a) -> dict:
 
 
 def synthetic_model(target: Path) -> None:
-    """A model file per docs/formats.md with an asymmetric lobe (no Ward symmetries),
-    also used for ward.kes.json while kesbrdf.models.kes is not installed."""
+    """A model file per docs/formats.md with an asymmetric lobe (no Ward symmetries) and a
+    Fresnel-like body (body_law a = 0.9, p = 4), also used for ward.kes.json while
+    kesbrdf.models.kes is not installed."""
     n_phi, n_gamma = 72, 29
     phi = np.arange(n_phi) * 2 * np.pi / n_phi
     gamma = np.linspace(0, np.radians(84), n_gamma)
@@ -115,6 +116,7 @@ def synthetic_model(target: Path) -> None:
         "input": {"name": "synthetic", "sha256": "", "sample": "synthetic test lobe", "quantity": "brdf"},
         "parameters": {"orientations": 4, "noise_floor": 1e-6, "fallback": "error", "body": "auto", "gamma_interpolation": "linear"},
         "diagnostics": {"fallback_gamma_deg": [], "floored": [], "residual_135": {}},
+        "body_law": {"a": 0.9, "p": 4.0},
         "arrays": {
             "phi_grid": _arr(phi),
             "gamma_grid": _arr(gamma),
@@ -143,6 +145,10 @@ def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
     lam = 0.5 if params.get("normalisation", "sqrtcos") == "bounded" else 0.0
     slope = 1.0 / np.radians(6.0) if params.get("extrapolation", "hold") == "fade" else 0.0
     line_sum = np.radians(float((doc.get("diagnostics") or {}).get("incidence_line_deg", params.get("incidence_line_deg", 90.0))))
+    law = doc.get("body_law") or {"a": 0.0, "p": 1.0}  # docs/formats.md step 3: c g(cos θ_i) g(cos θ_r)
+
+    def g(mu):
+        return 1 - float(law["a"]) * np.clip(1 - mu, 0, 1) ** float(law["p"])
     scale = np.ones(wi.shape[:-1])
     if mapping == "deviation":
         m = wi * np.array([-1.0, -1.0, 1.0])
@@ -164,7 +170,9 @@ def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
         gamma = np.abs(gamma)
         sin_half_beta = np.minimum(0.5 * np.sqrt(np.sin(p_r - p_i - np.pi) ** 2 + np.cos(t_r) ** 2), 1)
         sin_beta = np.maximum(np.sin(2 * np.arcsin(sin_half_beta)), 1e-6)
-        body_paper = body * np.sqrt(np.clip(np.cos(t_r - t_i), 0, None) / 2)[..., None]
+        ga = np.abs(t_r - t_i)
+        body_paper = body * (np.sqrt(np.clip(np.cos(t_r - t_i), 0, None) / 2)
+                             * g(np.cos((line_sum - ga) / 2)) * g(np.cos((line_sum + ga) / 2)))[..., None]
         if lam > 0:  # the table holds (f - c)·w; the paper reads (f - c)·√(cos θ_i cos θ_r) on the line
             geo = np.sqrt(np.clip((np.cos(gamma) + np.cos(line_sum)) / 2, 0, None))
             scale = scale * geo / np.maximum(geo, lam * np.cos(np.clip((line_sum - gamma) / 2, 0, np.pi / 2)))
@@ -187,7 +195,7 @@ def recipe_evaluate(doc: dict, wi, wr, mapping: str) -> np.ndarray:
     else:
         w = np.maximum(np.sqrt(wi[..., 2] * wr[..., 2]), lam * np.maximum(wi[..., 2], wr[..., 2]))
         fade = np.clip(1 - (gamma - gamma_grid[-1]) * slope, 0, 1)
-        f = body + q * (fade / w)[..., None]
+        f = body * (g(wi[..., 2]) * g(wr[..., 2]))[..., None] + q * (fade / w)[..., None]
     return np.where(((wi[..., 2] > 0) & (wr[..., 2] > 0))[..., None], f, 0.0)
 
 
@@ -210,7 +218,7 @@ def reference(model_path: Path, out: Path) -> None:
     wr[-4:] = wi[-4:] * np.array([-1.0, -1.0, 1.0])
     try:
         from kesbrdf.models.brdf import evaluate
-        from kesbrdf.models.kes import load
+        from kesbrdf.io.model_file import load_model as load
 
         model = load(model_path)
         source = "kesbrdf.models.brdf.evaluate"

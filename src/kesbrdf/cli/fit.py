@@ -38,7 +38,9 @@ def add_arguments(p):
     p.add_argument("--fallback", choices=("error", "log"), default=None,
                    help="where K(phi) <= 0 between orientations (default log, with a warning; "
                    "--strict is --fallback error)")
-    p.add_argument("--body", default=None, help="Lambertian body term: auto, none, or a value in 1/sr")
+    p.add_argument("--body", default=None,
+                   help="body term: auto (kes: a Fresnel-like c g(cos theta_i) g(cos theta_r) when the samples show one, "
+                        "else Lambertian; docs/models.md), lambertian, none, or a Lambertian value in 1/sr")
     p.add_argument("--warp-deg", type=float, default=None,
                    help="scattered (general-geometry) data: azimuth of the warp in the file's frame; "
                    "default: searched")
@@ -62,11 +64,11 @@ def _options(args) -> dict:
         options["fallback"] = args.fallback
     if args.body is not None:
         body = args.body
-        if body not in ("auto", "none"):
+        if body not in ("auto", "lambertian", "none"):
             try:
                 body = float(body)
             except ValueError:
-                raise KesbrdfError(f"--body: expected auto, none or a number, got {args.body!r}") from None
+                raise KesbrdfError(f"--body: expected auto, lambertian, none or a number, got {args.body!r}") from None
         options["body"] = body
     if args.warp_deg is not None:
         options["warp_deg"] = args.warp_deg

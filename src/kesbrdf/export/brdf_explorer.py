@@ -117,7 +117,8 @@ def _default_grid(model):
 
 def lobe_parameters(model) -> dict:
     """How the model scales its lobe (docs/formats.md, "How to evaluate a model", steps 2–3):
-    ``normalisation``, ``extrapolation`` and ``gamma_max`` (radians), keyword arguments of
+    ``normalisation``, ``extrapolation``, ``gamma_max`` (radians) and ``body_law`` (a, p of the
+    body's shape, eq. B3 of :mod:`kesbrdf.models.body`; (0, 1): Lambertian), keyword arguments of
     :func:`glsl_function` and :func:`numpy_port`.  Files without the two parameters are
     read as the model reads them (``sqrtcos``, ``hold``)."""
     normalisation = getattr(model, "normalisation", "sqrtcos")
@@ -127,7 +128,9 @@ def lobe_parameters(model) -> dict:
             f"brdf-explorer export: expected normalisation in {', '.join(NORMALISATIONS)} and extrapolation in "
             f"{', '.join(EXTRAPOLATIONS)}, got {str(normalisation)[:40]!r} and {str(extrapolation)[:40]!r}"
         )
-    return {"normalisation": normalisation, "extrapolation": extrapolation, "gamma_max": float(model.gamma_max)}
+    law = getattr(model, "body_law", None)
+    return {"normalisation": normalisation, "extrapolation": extrapolation, "gamma_max": float(model.gamma_max),
+            "body_law": (0.0, 1.0) if law is None else (float(law.a), float(law.p))}
 
 
 def _lobe_constants(normalisation: str, extrapolation: str):
@@ -153,11 +156,12 @@ def _f(x: float) -> str:
     return f"{float(x):.8e}"
 
 
-def glsl_function(table, d_gamma: float, body, *, normalisation: str, extrapolation: str, gamma_max: float) -> str:
+def glsl_function(table, d_gamma: float, body, *, normalisation: str, extrapolation: str, gamma_max: float,
+                  body_law=(0.0, 1.0)) -> str:
     """GLSL (the common subset of #version 410 and ES 3.00) of ``BRDF(L, V, N, X, Y)``.
 
-    ``normalisation``, ``extrapolation`` and ``gamma_max`` are the model's
-    (:func:`lobe_parameters`).
+    ``normalisation``, ``extrapolation``, ``gamma_max`` and ``body_law`` (a, p) are the
+    model's (:func:`lobe_parameters`).
     """
     n_phi, n_gamma, _ = table.shape
     lam, slope = _lobe_constants(normalisation, extrapolation)
@@ -173,6 +177,9 @@ const int kesNPhi = {n_phi};
 const int kesNGamma = {n_gamma};
 const float kesDGamma = {_f(d_gamma)};
 const vec3 KES_BODY = vec3({b[0]}, {b[1]}, {b[2]});
+// the body's shape g(mu) = 1 - a (1 - mu)^p, eq. B3 of kesbrdf.models.body (a = 0: Lambertian)
+const float kesBodyA = {_f(body_law[0])};
+const float kesBodyP = {_f(body_law[1])};
 // the parameters: colour tint on the body term, mapping 0 deviation / 1 halfvector
 #define kesBody (KES_BODY * tint)
 #define kesMapping (halfvector ? 1 : 0)
@@ -280,7 +287,8 @@ def downsampling_error(model, n_phi: int, n_gamma: int, n_pairs: int = 4000, see
     }
 
 
-def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False, *, normalisation: str, extrapolation: str, gamma_max: float):
+def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False, *, normalisation: str, extrapolation: str, gamma_max: float,
+               body_law=(0.0, 1.0)):
     """Line-by-line numpy port of :func:`glsl_function`'s ``BRDF`` (float64), shape (N, 3).
 
     ``normalisation``, ``extrapolation`` and ``gamma_max`` are the model's
@@ -317,7 +325,9 @@ def numpy_port(table, d_gamma, body, wi, wr, halfvector: bool = False, *, normal
     q = a * (1 - fu) + b * fu
     w = np.maximum(np.sqrt(wi[..., 2] * wr[..., 2]), lam * np.maximum(wi[..., 2], wr[..., 2]))
     fade = np.clip(1.0 - (gam - gamma_max) * slope, 0.0, 1.0)
-    f = np.asarray(body) + q * (fade / w)[..., None]
+    a, p = body_law
+    shape = 1.0 if a == 0.0 else ((1 - a * np.clip(1 - wi[..., 2], 0, 1) ** p) * (1 - a * np.clip(1 - wr[..., 2], 0, 1) ** p))[..., None]
+    f = np.asarray(body) * shape + q * (fade / w)[..., None]
     above = (wi[..., 2] > 0) & (wr[..., 2] > 0)
     return np.where(above[..., None], f, 0.0)
 

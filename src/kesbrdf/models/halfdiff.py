@@ -26,9 +26,13 @@ go to both.  In-plane samples cover the triangle θ_h ≤ θ_d, θ_h + θ_d = ma
 
 How the table is filled
 -----------------------
-1. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
-   samples used (eq. B1 of :mod:`kesbrdf.models.body`, the rule every kind shares),
-   ``"none"`` is c = 0, a number sets c.
+1. Body: ``body="auto"`` fits the Fresnel-like body c g(cos θ_i) g(cos θ_r) of eq. B3
+   of :mod:`kesbrdf.models.body` and keeps it when the samples show one (eq. B5–B6);
+   otherwise, and with ``body="lambertian"``, c = max(0, min f_r) per channel over the
+   in-plane samples used (eq. B1, the rule every kind shares); ``"none"`` is c = 0, a
+   number sets c.  The body is subtracted at each sample's own (θ_i, θ_r) and added back
+   at each node's for the interpolation over φ (step 4), so off the plane it is read at the
+   pair's own angles.
 2. Normalisation (``normalisation="bounded"``, default): the table holds
    q = (f_r − c)·w with w the foreshortening weight of :func:`kesbrdf.models.mappings.foreshortening`,
    max(√(cos θ_i cos θ_r), λ·max(cos θ_i, cos θ_r)): the paper's eq. 3 quantity, as
@@ -115,7 +119,7 @@ from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
-from kesbrdf.models.body import body_value
+from kesbrdf.models.body import BodyLaw, body_value, fit_body_law
 from kesbrdf.models.halfdiff_sigma import HALFDIFF_SIGMA_SCALES, SUPPORT_KEYS, halfdiff_coordinates
 from kesbrdf.models.halfdiff_sigma import sigma_summary as halfdiff_sigma_summary
 from kesbrdf.models.kes_sigma import StoredSigma, check_summary
@@ -208,6 +212,8 @@ class HalfDiffModel(StoredSigma, ReflectanceModel):
     input_info: dict = field(default_factory=dict)
     kesbrdf_version: str = __version__
     sigma: dict | None = None
+    #: the body's shape, eq. (B3) of :mod:`kesbrdf.models.body`; None: Lambertian
+    body_law: BodyLaw | None = None
 
     #: (a, q, b₀, b₁) of its σ, eq. (K1) (:class:`kesbrdf.models.kes_sigma.StoredSigma`)
     sigma_scales: ClassVar[dict] = HALFDIFF_SIGMA_SCALES
@@ -230,7 +236,7 @@ class HalfDiffModel(StoredSigma, ReflectanceModel):
         extrapolation = self.parameters.get("extrapolation", "hold")
         if extrapolation != "hold":  # in γ = 2θ_h, as the kes kind
             q *= fade(2.0 * theta_h, 2.0 * float(self.theta_h_grid[-1]), extrapolation)[:, None]
-        q += self.body
+        q += self.body if self.body_law is None else self.body * self.body_law(wi[:, 2], wr[:, 2])[:, None]
         return q
 
     def mirror_behaviour(self) -> dict:
@@ -239,8 +245,10 @@ class HalfDiffModel(StoredSigma, ReflectanceModel):
     # -- capabilities (kinds contract) -------------------------------------------
     def describe(self) -> str:
         n_phi, n_h, n_d = self.table.shape[:3]
+        body = ("" if self.body_law is None else
+                f", Fresnel-like body c g(cos theta_i) g(cos theta_r) (a {self.body_law.a:g}, p {self.body_law.p:g})")
         return (f"kes-halfdiff table {n_phi} x {n_h} x {n_d} over (phi_h, theta_h, theta_d), "
-                f"{self.orientations} orientations, channels {', '.join(self.channels)}")
+                f"{self.orientations} orientations{body}, channels {', '.join(self.channels)}")
 
     def render_plugin(self, mapping=None, extrapolation=None):
         """The ``kesbrdf_halfdiff`` plugin: its own (φ_h, θ_h, θ_d) parametrisation, so a
@@ -252,6 +260,8 @@ class HalfDiffModel(StoredSigma, ReflectanceModel):
 
     def to_payload(self):
         fields = {} if self.sigma is None else {"sigma": self.sigma}
+        if self.body_law is not None:
+            fields["body_law"] = self.body_law.to_dict()
         return fields, {name: getattr(self, name) for name in _ARRAYS}
 
     @classmethod
@@ -291,7 +301,8 @@ class HalfDiffModel(StoredSigma, ReflectanceModel):
                 )
         # absent in files written before it: no σ
         sigma = None if fields.get("sigma") is None else check_summary(fields["sigma"], source, SUPPORT_KEYS)
-        return cls(**shared, **arr, sigma=sigma)
+        law = None if fields.get("body_law") is None else BodyLaw.from_dict(fields["body_law"], source)
+        return cls(**shared, **arr, sigma=sigma, body_law=None if law is None or law.lambertian else law)
 
     @classmethod
     def fit_measurement(cls, measurement, **options) -> "HalfDiffModel":
@@ -545,8 +556,18 @@ def fit_halfdiff(
     used = np.concatenate(rows)
     theta_h, theta_d, _ = in_plane_half_diff(m.theta_i[used], m.theta_r[used])
 
-    # 1b. body term
-    c, body_mode = body_value(body, m.values[used], C)  # kesbrdf.models.body, eq. B1
+    # 1b. body term (kesbrdf.models.body): Fresnel-like c g(μ_i) g(μ_r) (eq. B3-B6) or B1
+    law, law_report = None, None
+    if isinstance(body, str) and body == "auto":
+        c, law, law_report = fit_body_law(m.values[used], m.wi[used], m.wr[used])
+        body_mode = "auto"
+    else:
+        c, body_mode = body_value(body, m.values[used], C)
+        body_mode = "lambertian" if body == "lambertian" else body_mode
+
+    def shape(theta_i, theta_r):  # g(μ_i) g(μ_r) of the body (1: Lambertian)
+        theta_i = np.asarray(theta_i, float)
+        return np.ones_like(theta_i) if law is None else law(np.cos(theta_i), np.cos(theta_r))
 
     def weight(theta_i, theta_r):
         if normalisation == "none":
@@ -566,7 +587,7 @@ def fit_halfdiff(
     for k, r in enumerate(rows):
         th, td, upper = in_plane_half_diff(m.theta_i[r], m.theta_r[r])
         mirror = np.abs(m.theta_r[r] - m.theta_i[r]) < ANGLE_TOL
-        lobe = (m.values[r] - c) * weight(m.theta_i[r], m.theta_r[r])[:, None]
+        lobe = (m.values[r] - c * shape(m.theta_i[r], m.theta_r[r])[:, None]) * weight(m.theta_i[r], m.theta_r[r])[:, None]
         for slot, sel in ((k, upper | mirror), (k + 4, ~upper | mirror)):
             if np.count_nonzero(sel) < 2:
                 raise MeasurementError(
@@ -576,7 +597,7 @@ def fit_halfdiff(
             q_half[:, :, slot, :] = _resample_slot(th[sel], td[sel], lobe[sel], H, D)
             slot_counts[str(slot)] = int(np.count_nonzero(sel))
     # 4. body back in: KES works on the measured quantity (as kesbrdf.models.kes.fit)
-    body_q = c * w_nodes[..., None]  # (h, d, C)
+    body_q = c * (w_nodes * shape(D - H, D + H))[..., None]  # (h, d, C)
     q_half[:, :, slots, :] += body_q[:, :, None, :]
     # θ_i = θ_r = 0 is one geometry for every ψ: its samples are averaged (with noise
     # they differ, and the pair has no azimuth to tell them apart)
@@ -661,6 +682,8 @@ def fit_halfdiff(
         "lobe_clamped": clamped,
         "normal_pair": normal_pair,
     }
+    if law_report is not None:
+        diagnostics["body_law"] = law_report
     return HalfDiffModel(
         channels=tuple(m.channels),
         phi_grid=phi_grid,
@@ -681,6 +704,7 @@ def fit_halfdiff(
         },
         diagnostics=diagnostics,
         input_info=m.input_info(),
+        body_law=law,
     )
 
 

@@ -17,11 +17,14 @@ How the table is filled
 1. Signed γ = θ_r − θ_i of each in-plane sample at orientation ψ becomes a
    half-sample at deviation azimuth ψ (γ > 0) or ψ + π (γ < 0) with |γ|; at γ = 0
    both halves get the same sample (the plane of incidence, docs/method.md, "From the table to a BRDF").
-2. Body: ``body="auto"`` takes c = max(0, min f_r) per channel over the in-plane
-   samples (the darkest reading is an upper bound of the diffuse floor, eq. B1 of
-   :mod:`kesbrdf.models.body`, the rule every kind shares; noise makes it a slight
-   underestimate, which only moves energy to the lobe); ``"none"`` is c = 0 (the
-   paper's pure lobe); a number sets c.
+2. Body: ``body="auto"`` fits the Fresnel-like body c g(cos θ_i) g(cos θ_r) of eq. B3
+   of :mod:`kesbrdf.models.body` to the samples and keeps it when its shape is
+   Fresnel-like (eq. B5); otherwise, and with ``body="lambertian"``, c = max(0, min f_r)
+   per channel over the in-plane samples (the darkest reading is an upper bound of the
+   diffuse floor, eq. B1, the rule every kind shares; noise makes it a slight
+   underestimate, which only moves energy to the lobe); ``"none"`` is c = 0 (the paper's
+   pure lobe); a number sets c.  The body is split off after the interpolation over φ
+   (step 5), so it changes nothing in the plane of incidence.
 3. Noise floor: q is floored at ``noise_floor`` (default: 1e-4 × the channel's peak
    q, a 14-bit dynamic range) so that K = 1/q stays finite; every floored
    half-sample is recorded in ``diagnostics["floored"]``.
@@ -52,7 +55,7 @@ from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
-from kesbrdf.models.body import body_value
+from kesbrdf.models.body import BodyLaw, body_value, fit_body_law
 from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, StoredSigma, check_summary, kes_coordinates, sigma_summary
 from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
@@ -123,11 +126,14 @@ class Model(StoredSigma, ReflectanceModel):
     table : ndarray (n_phi, n_gamma, C)
         Lobe quantity q, 1/sr, ≥ 0.
     body : ndarray (C,)
-        Lambertian body c, 1/sr.
+        Body c, 1/sr: Lambertian, or times g(cos θ_i) g(cos θ_r) of ``body_law``.
     gamma_nodes, q_nodes : ndarray
         The measured half-sample nodes (for plots and the viewer).
     sigma : dict or None
         The numbers of its per-prediction σ (:mod:`kesbrdf.models.kes_sigma`, eq. K1).
+    body_law : BodyLaw or None
+        The Fresnel-like shape of the body (:mod:`kesbrdf.models.body`, eq. B3); None: a
+        Lambertian body (every file written before it).
     """
 
     kind: ClassVar[str] = "kes"
@@ -154,6 +160,8 @@ class Model(StoredSigma, ReflectanceModel):
     #: What the fit's own data say about the table's error (:func:`kesbrdf.models.kes_sigma.sigma_summary`):
     #: the σ of eq. (K1); None for files written before it, baselines and tabulated tables.
     sigma: dict | None = None
+    #: eq. (B3) of :mod:`kesbrdf.models.body`; None: Lambertian.
+    body_law: BodyLaw | None = None
 
     @property
     def gamma_max(self) -> float:
@@ -228,7 +236,8 @@ class Model(StoredSigma, ReflectanceModel):
                 g = np.abs(gamma)
                 S = self.line_sum
                 rho *= (line_foreshortening(g, S, "sqrtcos") / line_foreshortening(g, S, self.normalisation))[:, None]
-            rho += self.body * np.sqrt(np.maximum(np.cos(gamma), 0.0) * 0.5)[:, None]
+            rho += self.body * (np.sqrt(np.maximum(np.cos(gamma), 0.0) * 0.5)
+                                * self.line_body_shape(np.abs(gamma)))[:, None]
             rho *= (inv_norm / sin_beta)[:, None]
             return rho
         phi, gamma = to_phi_gamma(wi, wr, mapping)
@@ -237,8 +246,17 @@ class Model(StoredSigma, ReflectanceModel):
         if self.extrapolation != "hold":
             scale *= fade(gamma, self.gamma_max, self.extrapolation)
         q *= scale[:, None]
-        q += self.body
+        q += self.body if self.body_law is None else self.body * self.body_law(cos_theta_i, cos_theta_r)[:, None]
         return q
+
+    def line_body_shape(self, gamma) -> np.ndarray:
+        """g(cos θ_i) g(cos θ_r) of the body on the table's incidence line at deviation |γ|
+        (θ_{i,r} = (S ∓ |γ|)/2); 1 for a Lambertian body."""
+        gamma = np.abs(np.asarray(gamma, float))
+        if self.body_law is None:
+            return np.ones_like(gamma)
+        S = self.line_sum
+        return self.body_law(np.cos((S - gamma) / 2.0), np.cos((S + gamma) / 2.0))
 
     def lookup_unit(self, phi, gamma) -> np.ndarray:
         """Bilinear lookup for φ ∈ [0, 2π], γ ≥ 0 (finite), shape (n, C) (:func:`kesbrdf.models.table.lookup_unit`)."""
@@ -282,7 +300,9 @@ class Model(StoredSigma, ReflectanceModel):
         if p.get("fit") == "scattered":
             return (f"scattered fit of {d.get('n_used', '?')} samples, warp at {float(p.get('warp_offset_deg', 0.0)):.1f} deg "
                     f"({p.get('warp_offset_rule', 'given')}), symmetry {p.get('symmetry')}, body {self.body.tolist()}; {table}")
-        return f"{self.orientations} orientations, {len(self.gamma_nodes)} gamma nodes; {table}"
+        body = ("" if self.body_law is None else
+                f", Fresnel-like body c g(cos theta_i) g(cos theta_r) (a {self.body_law.a:g}, p {self.body_law.p:g})")
+        return f"{self.orientations} orientations, {len(self.gamma_nodes)} gamma nodes{body}; {table}"
 
     def refit_options(self) -> dict:
         """As the base class, without ``orientations`` (the subset says how many it has)."""
@@ -294,6 +314,8 @@ class Model(StoredSigma, ReflectanceModel):
     # -- model file (kinds contract) -------------------------------------------
     def to_payload(self):
         fields = {} if self.sigma is None else {"sigma": self.sigma}
+        if self.body_law is not None:
+            fields["body_law"] = self.body_law.to_dict()
         return fields, {name: getattr(self, name) for name in _ARRAYS}
 
     @classmethod
@@ -342,7 +364,11 @@ class Model(StoredSigma, ReflectanceModel):
         sigma = None
         if fields.get("sigma") is not None:  # absent in files written before it: no σ
             sigma = check_summary(fields["sigma"], source)
-        return cls(**shared, **arr, sigma=sigma)
+        law = None
+        if fields.get("body_law") is not None:  # absent in files written before it: Lambertian
+            law = BodyLaw.from_dict(fields["body_law"], source)
+            law = None if law.lambertian else law
+        return cls(**shared, **arr, sigma=sigma, body_law=law)
 
     # -- fitting (kinds contract) ----------------------------------------------
     @classmethod
@@ -490,8 +516,9 @@ def fit(
     fallback : {"log", "error"}
         What to do where K(φ) ≤ 0 between orientations (docs/method.md, "Interpolation over orientation"): interpolate log ρ
         there with a recorded warning (default), or raise :class:`KESError`.
-    body : "auto", "none" or float
-        Lambertian body term c in 1/sr (module docstring).
+    body : "auto", "lambertian", "none" or float
+        The body term in 1/sr (module docstring): ``auto`` a Fresnel-like c g(μ_i) g(μ_r)
+        when the samples show one, else Lambertian c of eq. B1 (``lambertian`` always).
     noise_floor : "auto" or float
         Floor of q (same unit as q: 1/sr).
     interpolation : {"kes", "nearest", "linear"}
@@ -554,13 +581,25 @@ def fit(
     used = np.concatenate(used_rows)
     values_used = m.values[used]
 
-    # 2. body term: the shared rule (kesbrdf.models.body, eq. B1: at most the darkest reading)
-    c, body_mode = body_value(body, values_used, C)
+    # 2. body term: the shared rule (kesbrdf.models.body): a Fresnel-like c g(μ_i) g(μ_r)
+    #    when the samples show one (eq. B3-B5, body="auto"), else at most the darkest reading (B1)
+    law, law_report = None, None
+    if isinstance(body, str) and body == "auto":
+        c, law, law_report = fit_body_law(values_used, m.wi[used], m.wr[used])
+        body_mode = "auto"
+    elif isinstance(body, str) and body == "lambertian":
+        c, body_mode = body_value("auto", values_used, C)
+        body_mode = "lambertian"
+    else:
+        c, body_mode = body_value(body, values_used, C)
 
     # 3. q = f·√(cos θ_i cos θ_r) of every half-sample (body included: KES works on
     #    the measured quantity, as in the paper), floored at the noise level
     gamma_nodes = _merge_close(np.concatenate([curves[s][0] for s in curves]))
     slots = kes.half_slots(orientations)
+    def body_line(g):  # g(μ_i) g(μ_r) of the body on the line at |γ| (1: Lambertian)
+        return np.ones_like(g) if law is None else law(np.cos((line_sum - g) / 2.0), np.cos((line_sum + g) / 2.0))
+
     q_half_nodes = np.full((gamma_nodes.size, 8, C), np.nan)
     for slot in slots:
         g, f = curves[slot]
@@ -597,12 +636,13 @@ def fit(
     # 5. interpolate over φ at every γ, then split off the body: lobe = q − c·w(γ)
     phi_grid = np.arange(n_phi) * (2 * np.pi / n_phi)
     table, fallback_gamma = fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback)
-    body_q = c[None, None, :] * line_weight(gamma_grid, line_sum, normalisation)[None, :, None]
+    body_q = c[None, None, :] * (line_weight(gamma_grid, line_sum, normalisation) * body_line(gamma_grid))[None, :, None]
     lobe = table - body_q
     clamped = int(np.count_nonzero(lobe < -1e-12 * np.abs(table)))
     table = np.maximum(lobe, 0.0)
     q_total_nodes = q_half_nodes
-    q_half_nodes = q_half_nodes - c[None, None, :] * line_weight(gamma_nodes, line_sum, normalisation)[:, None, None]
+    q_half_nodes = q_half_nodes - c[None, None, :] * (line_weight(gamma_nodes, line_sum, normalisation)
+                                                      * body_line(gamma_nodes))[:, None, None]
 
     fallback_deg = [round(float(np.degrees(gamma_grid[i])), 6) for i in fallback_gamma]
     diagnostics = {
@@ -615,6 +655,8 @@ def fit(
         "lobe_clamped": clamped,
         "gamma0_peaks": _gamma0_peaks(q_half_nodes, gamma_nodes, slots, m.channels),
     }
+    if law_report is not None:
+        diagnostics["body_law"] = law_report
     if orientations == 4:
         diagnostics["residual_135"] = _residual_135(q_total_nodes, m.channels)
     return Model(
@@ -639,6 +681,7 @@ def fit(
         },
         diagnostics=diagnostics,
         input_info=m.input_info(),
+        body_law=law,
     )
 
 

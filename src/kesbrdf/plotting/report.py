@@ -266,6 +266,8 @@ def _model_summary(model) -> dict:
     return {
         **out,
         "body c of the (φ, γ) table (1/sr)": np.asarray(table.body, float).tolist(),
+        **({"body shape g(μ) = 1 − a(1 − μ)^p (eq. B3)": {"a": table.body_law.a, "p": table.body_law.p}}
+           if getattr(table, "body_law", None) is not None else {}),
         "input": (model.input_info or {}).get("name"),
         "sample": (model.input_info or {}).get("sample"),
     }

@@ -119,6 +119,21 @@ def model_rgb(model, source=None):
     )
 
 
+def body_law_of(model):
+    """(a, p) of a model's body law (eq. B3 of :mod:`kesbrdf.models.body`), or None: Lambertian."""
+    law = getattr(model, "body_law", None)
+    return None if law is None else (float(law.a), float(law.p))
+
+
+def body_shape(law, cos_i, cos_r):
+    """g(cos θ_i) g(cos θ_r) in Dr.Jit, g(μ) = 1 − a (1 − μ)^p for ``law`` = (a, p); 1 for None."""
+    if law is None:
+        return 1.0
+    a, p = law
+    g = lambda mu: 1.0 - a * dr.power(dr.clip(1.0 - mu, 0.0, 1.0), p)  # noqa: E731
+    return g(cos_i) * g(cos_r)
+
+
 def check_model(path, mapping: str | None = None):
     """Load and check a model for the renderer before Mitsuba sees it.
 
@@ -342,6 +357,9 @@ class KesBSDF(FabricBSDF):
 
         self.table = KesTable(table, model.gamma_grid)
         self.normalisation = model.normalisation
+        # the body's shape, eq. (B3) of kesbrdf.models.body: c g(cos θ_i) g(cos θ_r),
+        # g(μ) = 1 − a (1 − μ)^p; None: Lambertian.  A colourway's base colour keeps it.
+        self.body_law = body_law_of(model)
         self.gamma_max = self.table.gamma_max
         self._gamma_max = opaque_float(self.gamma_max)
         self.body = opaque_rgb(body)
@@ -369,8 +387,12 @@ class KesBSDF(FabricBSDF):
         above = (cos_i > 0.0) & (cos_r > 0.0) & active
         phi, gamma = self._phi_gamma(wi, wr)
         q = self.lobe_q(phi, gamma)
-        f = self.body + q / foreshortening(cos_i, cos_r, self.normalisation)
+        f = self.body * self.body_shape(cos_i, cos_r) + q / foreshortening(cos_i, cos_r, self.normalisation)
         return dr.select(above, f, 0.0)
+
+    def body_shape(self, cos_i, cos_r):
+        """g(cos θ_i) g(cos θ_r) of eq. (B3) (1 for a Lambertian body)."""
+        return body_shape(self.body_law, cos_i, cos_r)
 
     def to_string(self):
         return (

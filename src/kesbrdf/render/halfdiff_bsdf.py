@@ -38,7 +38,8 @@ import drjit as dr
 import mitsuba as mi
 
 from kesbrdf.errors import ModelError, where
-from kesbrdf.render.bsdf import AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, foreshortening, parse_rgb
+from kesbrdf.render.bsdf import (AZIMUTH_EPS, EXTRAPOLATIONS, FADE_DEG, FabricBSDF, body_law_of, body_shape, foreshortening,
+                                 parse_rgb)
 from kesbrdf.render.jit import opaque_rgb
 
 __all__ = ["HalfDiffBSDF", "HalfDiffTable", "half_diff", "register", "check_halfdiff_model"]
@@ -139,6 +140,7 @@ class HalfDiffBSDF(FabricBSDF):
         self.table = HalfDiffTable(table, model.theta_h_grid, model.theta_d_grid)
         self.h_max = self.table.h_max
         self.body = opaque_rgb(body)  # one compiled kernel for every body colour (render.jit)
+        self.body_law = body_law_of(model)  # eq. (B3) of kesbrdf.models.body; a base colour keeps it
 
         sampling = str(_prop(props, "sampling", "lobe"))
         q_mean = table.mean(axis=(2, 3))  # (φ_h, θ_h)
@@ -156,7 +158,7 @@ class HalfDiffBSDF(FabricBSDF):
             q = q * dr.clip(1.0 - (theta_h - self.h_max) * (2.0 / math.radians(FADE_DEG)), 0.0, 1.0)
         if self.normalisation != "none":
             q = q / foreshortening(wi.z, wr.z, self.normalisation)
-        return dr.select(above, self.body + q, 0.0)
+        return dr.select(above, self.body * body_shape(self.body_law, wi.z, wr.z) + q, 0.0)
 
     def to_string(self):
         return f"HalfDiffBSDF[filename={self.filename!r}, two_sided={self.two_sided}, sampling={self.sampling!r}]"

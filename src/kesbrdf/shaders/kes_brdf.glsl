@@ -9,6 +9,9 @@
 //                                gamma_j = j*kesDGamma (texture or constant arrays)
 //   int kesNPhi, kesNGamma; float kesDGamma;  the table's grid
 //   vec3 kesBody               body term c in 1/sr
+//   float kesBodyA, kesBodyP   its shape g(mu) = 1 - kesBodyA*(1 - mu)^kesBodyP, the body being
+//                              c g(cos theta_i) g(cos theta_r) (eq. B3 of kesbrdf.models.body;
+//                              kesBodyA = 0: Lambertian)
 //   int kesMapping             0 deviation, 1 halfvector, 2 paper (eq. 3-4 literally)
 //   float kesLambda            w = max(sqrt(cos_i cos_r), kesLambda*max(cos_i, cos_r)):
 //                              0.5 "bounded", 0 "sqrtcos" (kesbrdf.models.mappings)
@@ -57,6 +60,14 @@ void kesPhiGamma(vec3 wi, vec3 wr, out float phi, out float gamma) {
   phi = atan(s.y, s.x);
 }
 
+// The body's factor g(cos_i) g(cos_r) (kesbrdf.models.body.BodyLaw); 1 for a Lambertian body.
+float kesBodyG(float mu) {
+  return 1.0 - kesBodyA * pow(clamp(1.0 - mu, 0.0, 1.0), kesBodyP);
+}
+float kesBodyShape(float cosI, float cosR) {
+  return kesBodyA == 0.0 ? 1.0 : kesBodyG(cosI) * kesBodyG(cosR);
+}
+
 // Foreshortening weight w of f_r = c + fade*q/w (kesbrdf.models.mappings.foreshortening).
 float kesWeight(float cosI, float cosR) {
   return max(sqrt(cosI * cosR), kesLambda * max(cosI, cosR));
@@ -92,16 +103,18 @@ vec3 kesPaper(vec3 wi, vec3 wr) {
   float c = cos(thetaR);
   float sinHalfBeta = clamp(0.5 * sqrt(s * s + c * c), 0.0, 1.0);
   float sinBeta = max(sin(2.0 * asin(sinHalfBeta)), KES_PAPER_MIN_SIN_BETA);
-  vec3 rho = kesLookup(phi, abs(gamma)) * kesLineRatio(abs(gamma)) + kesBody * sqrt(max(cos(gamma), 0.0) / 2.0);
+  float g = abs(gamma);
+  float bodyLine = kesBodyShape(cos((kesLineSum - g) / 2.0), cos((kesLineSum + g) / 2.0));
+  vec3 rho = kesLookup(phi, g) * kesLineRatio(g) + kesBody * (sqrt(max(cos(gamma), 0.0) / 2.0) * bodyLine);
   return rho / (sqrt(wi.z * wr.z) * sinBeta);
 }
 
-// f_r = c + fade(gamma)*q/w in 1/sr per channel; zero at or below the horizon.
+// f_r = c g(cos_i) g(cos_r) + fade(gamma)*q/w in 1/sr per channel; zero at or below the horizon.
 vec3 kesBRDF(vec3 wi, vec3 wr) {
   if (wi.z <= 0.0 || wr.z <= 0.0) return vec3(0.0);
   if (kesMapping == 2) return kesPaper(wi, wr);
   float phi;
   float gamma;
   kesPhiGamma(wi, wr, phi, gamma);
-  return kesBody + kesLookup(phi, gamma) * (kesFade(gamma) / kesWeight(wi.z, wr.z));
+  return kesBody * kesBodyShape(wi.z, wr.z) + kesLookup(phi, gamma) * (kesFade(gamma) / kesWeight(wi.z, wr.z));
 }

@@ -11,6 +11,8 @@ uniform int kesNPhi;
 uniform int kesNGamma;
 uniform float kesDGamma;
 uniform vec3 kesBody;     // body term c in 1/sr (model's, or base_color/pi for a colourway)
+uniform float kesBodyA;   // the body's shape g(mu) = 1 - kesBodyA*(1 - mu)^kesBodyP (body_law; 0: Lambertian)
+uniform float kesBodyP;
 uniform int kesMapping;   // 0 deviation, 1 halfvector, 2 paper (eq. 3-4 literally)
 // The model file's parameters (docs/formats.md steps 2-3; model.ts KesModel):
 uniform float kesLambda;    // w = max(sqrt(cos_i cos_r), kesLambda*max(cos_i, cos_r)): 0.5 "bounded", 0 "sqrtcos"
