@@ -158,3 +158,34 @@ def test_kes_table_has_no_spike_where_k_nears_zero():
     rows = [int(np.argmin(np.abs(model.gamma_grid - g))) for g in model.gamma_nodes]
     assert np.all(model.table[:, rows, :] <= OVERSHOOT * brightest[None] * (1 + 1e-9))
     assert 80.0 in [round(g) for g in model.diagnostics["fallback_gamma_deg"]]
+
+
+#: Fig. 6 hemisphere NRMSE of the paper protocol's table of an anisotropic Ward (α 0.1 /
+#: 0.25), read off the plane with the half-vector and the deviation mapping: measured
+#: 0.041 and 0.077 (ratio 0.54; the deviation reading gives an off-plane lobe its in-plane
+#: width).  The half-vector reading must be at most 0.7 of the deviation one; a swapped or
+#: broken mapping default gives ratio 1.
+HALFVECTOR_GAIN_MAX = 0.7
+
+
+def test_new_fits_record_and_use_the_half_vector_mapping():
+    from kesbrdf.measure.gonio import measure
+    from kesbrdf.models.kes import fit
+    from kesbrdf.references.ward import AnisotropicWard
+    from kesbrdf.validate.lofo import score, scoring_truths
+
+    ref = AnisotropicWard(0.1, 0.25, rho_d=[0.3, 0.2, 0.1], rho_s=0.08)
+    m = measure(ref, noise=0.02, rng=3)
+    model = fit(m)
+    assert model.parameters["mapping"] == "halfvector" == model.default_mapping
+    t = scoring_truths(ref)
+    half = score(model.evaluate, None, t)
+    dev = score(lambda wi, wr: model.evaluate(wi, wr, "deviation"), None, t)
+    assert half["hemispheres"] < HALFVECTOR_GAIN_MAX * dev["hemispheres"], (half, dev)
+    assert half["orientations"] == pytest.approx(dev["orientations"], rel=1e-9)  # the plane is the same
+    # a file that records no mapping is read as it was fitted, with the deviation mapping
+    params = {k: v for k, v in model.parameters.items() if k != "mapping"}
+    old = type(model)(**{**model.__dict__, "parameters": params})
+    assert old.default_mapping == "deviation"
+    np.testing.assert_array_equal(old.evaluate(t["hemis"][0][0], t["hemis"][0][1]),
+                                  model.evaluate(t["hemis"][0][0], t["hemis"][0][1], "deviation"))
