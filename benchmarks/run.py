@@ -25,6 +25,8 @@ def main() -> int:
     ap = argparse.ArgumentParser()
     ap.add_argument("--output", default=str(HERE / "results.json"))
     ap.add_argument("--only", nargs="*", help="bench module names (e.g. core render)")
+    ap.add_argument("--merge", action="store_true",
+                    help="keep the other sections of the output file (with --only: rerun some, keep the rest)")
     args = ap.parse_args()
     from kesbrdf import __version__
 
@@ -34,6 +36,8 @@ def main() -> int:
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
         "benchmarks": {},
     }
+    if args.merge and Path(args.output).is_file():
+        results["benchmarks"] = dict(json.loads(Path(args.output).read_text()).get("benchmarks", {}))
     for path in sorted(HERE.glob("bench_*.py")):
         name = path.stem[len("bench_"):]
         if args.only and name not in args.only:
