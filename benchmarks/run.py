@@ -36,8 +36,7 @@ def main() -> int:
         "machine": {"python": platform.python_version(), "cpus": os.cpu_count(), "platform": platform.platform()},
         "benchmarks": {},
     }
-    if args.merge and Path(args.output).is_file():
-        results["benchmarks"] = dict(json.loads(Path(args.output).read_text()).get("benchmarks", {}))
+
     for path in sorted(HERE.glob("bench_*.py")):
         name = path.stem[len("bench_"):]
         if args.only and name not in args.only:
@@ -53,6 +52,9 @@ def main() -> int:
             results["benchmarks"][name] = {"error": f"{type(exc).__name__}: {exc}"}
             traceback.print_exc()
         print(f"bench {name}: {time.perf_counter() - t0:.1f}s", file=sys.stderr, flush=True)
+    if args.merge and Path(args.output).is_file():  # read now: another bench may have merged meanwhile
+        kept = dict(json.loads(Path(args.output).read_text()).get("benchmarks", {}))
+        results["benchmarks"] = {**kept, **results["benchmarks"]}
     tmp = Path(args.output).with_suffix(".part")
     tmp.write_text(json.dumps(results, indent=1, default=float) + "\n")
     os.replace(tmp, args.output)
