@@ -89,7 +89,8 @@ import numpy as np
 from kesbrdf.errors import KESError
 
 __all__ = ["body_bound", "body_value", "log_body_upper", "LOG_BODY_MIN", "BODY_NOISE_Z", "BodyLaw", "fit_body_law",
-           "fresnel_like", "BODY_QUANTILE", "FRESNEL_LIKE", "FAR_DEG", "FAR_RATIO_MAX", "LAW_A_GRID", "LAW_P_GRID"]
+           "fresnel_like", "body_term", "body_factor", "line_body_factor", "BODY_QUANTILE", "FRESNEL_LIKE", "FAR_DEG",
+           "FAR_RATIO_MAX", "LAW_A_GRID", "LAW_P_GRID"]
 
 #: Readings' standard deviations a fitted body may exceed the darkest reading by (eq. B2):
 #: with 116–900 readings the darkest one lies about 2–3 σ below its expectation, so
@@ -197,6 +198,15 @@ class BodyLaw:
         return {"form": "c g(cos theta_i) g(cos theta_r), g(mu) = 1 - a (1 - mu)^p", "a": self.a, "p": self.p}
 
     @classmethod
+    def from_fields(cls, fields: dict, source=None) -> "BodyLaw | None":
+        """The law a model file's ``body_law`` field holds; None when absent (files written
+        before it) or Lambertian (a = 0)."""
+        if fields.get("body_law") is None:
+            return None
+        law = cls.from_dict(fields["body_law"], source)
+        return None if law.lambertian else law
+
+    @classmethod
     def from_dict(cls, d, source=None) -> "BodyLaw":
         from kesbrdf.errors import ModelError, where
 
@@ -246,18 +256,17 @@ def fit_body_law(values, wi, wr, quantile: float = BODY_QUANTILE, bounds=None):
             res = r - lc
             loss = float(np.sum(np.where(res >= 0, quantile * res, (quantile - 1.0) * res)))
             if best is None or loss < best[0] - 1e-12:
-                best = (loss, law)
+                best = (loss, law, lc)
             if a == 0.0:
                 break  # p does not matter for the Lambertian body
-    law = best[1]
+    _, law, lc = best
     g45, g87 = (float(v) for v in law.shape(np.cos(np.radians([45.0, 87.0]))))
     report = {"a": law.a, "p": law.p, "g45": g45, "g87": g87, "kept": False}
-    if law.lambertian or not fresnel_like(law, FRESNEL_LIKE if bounds is None else bounds):
+    if law.lambertian or not fresnel_like(law, bounds):
         report["reason"] = "not Fresnel-like (eq. B5)" if not law.lambertian else "Lambertian"
         return lambertian, None, report
     shape = law(ci, cr)
-    r = ly - np.log(shape[ok])[:, None]
-    c = np.exp(np.quantile(r, quantile, axis=0))
+    c = np.exp(lc)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(np.isfinite(y), y / (c[None, :] * shape[:, None]), np.inf)
     c = c * np.minimum(1.0, np.maximum(np.nanmin(ratio, axis=0), 0.0))  # eq. (B4): B <= y at every reading
@@ -274,3 +283,28 @@ def fit_body_law(values, wi, wr, quantile: float = BODY_QUANTILE, bounds=None):
         return lambertian, None, report
     report["kept"] = True
     return c, law, report
+
+
+def body_factor(law, mu_i, mu_r) -> np.ndarray:
+    """g(μ_i) g(μ_r) of ``law`` (eq. B3) at the cosines, 1 where ``law`` is None (Lambertian)."""
+    mu_i = np.asarray(mu_i, float)
+    return np.ones_like(mu_i) if law is None else law(mu_i, mu_r)
+
+
+def line_body_factor(law, gamma, line_sum: float) -> np.ndarray:
+    """:func:`body_factor` on the in-plane line θ_i + θ_r = ``line_sum`` at deviation |γ|
+    (θ_{i,r} = (S ∓ |γ|)/2), where a KES table holds its samples."""
+    g = np.abs(np.asarray(gamma, float))
+    return body_factor(law, np.cos((line_sum - g) / 2.0), np.cos((line_sum + g) / 2.0))
+
+
+def body_term(body, values, wi, wr, n_channels: int):
+    """(c (C,), law, mode, report) of a KES table fit's ``body`` option (``kes`` and
+    ``kes-halfdiff``): ``"auto"`` fits eq. (B3)–(B6) to ``values`` at the pairs (law None:
+    Lambertian, and ``report`` says why); ``"lambertian"``, ``"none"`` or a number are
+    :func:`body_value`'s, with law and report None."""
+    if isinstance(body, str) and body == "auto":
+        c, law, report = fit_body_law(values, wi, wr)
+        return c, law, "auto", report
+    c, mode = body_value(body, values, n_channels)
+    return c, None, ("lambertian" if isinstance(body, str) and body == "lambertian" else mode), None

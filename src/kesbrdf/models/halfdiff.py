@@ -119,7 +119,7 @@ from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
-from kesbrdf.models.body import BodyLaw, body_value, fit_body_law
+from kesbrdf.models.body import BodyLaw, body_factor, body_term
 from kesbrdf.models.halfdiff_sigma import HALFDIFF_SIGMA_SCALES, SUPPORT_KEYS, halfdiff_coordinates
 from kesbrdf.models.halfdiff_sigma import sigma_summary as halfdiff_sigma_summary
 from kesbrdf.models.kes_sigma import StoredSigma, check_summary
@@ -301,8 +301,7 @@ class HalfDiffModel(StoredSigma, ReflectanceModel):
                 )
         # absent in files written before it: no σ
         sigma = None if fields.get("sigma") is None else check_summary(fields["sigma"], source, SUPPORT_KEYS)
-        law = None if fields.get("body_law") is None else BodyLaw.from_dict(fields["body_law"], source)
-        return cls(**shared, **arr, sigma=sigma, body_law=None if law is None or law.lambertian else law)
+        return cls(**shared, **arr, sigma=sigma, body_law=BodyLaw.from_fields(fields, source))
 
     @classmethod
     def fit_measurement(cls, measurement, **options) -> "HalfDiffModel":
@@ -557,17 +556,10 @@ def fit_halfdiff(
     theta_h, theta_d, _ = in_plane_half_diff(m.theta_i[used], m.theta_r[used])
 
     # 1b. body term (kesbrdf.models.body): Fresnel-like c g(μ_i) g(μ_r) (eq. B3-B6) or B1
-    law, law_report = None, None
-    if isinstance(body, str) and body == "auto":
-        c, law, law_report = fit_body_law(m.values[used], m.wi[used], m.wr[used])
-        body_mode = "auto"
-    else:
-        c, body_mode = body_value(body, m.values[used], C)
-        body_mode = "lambertian" if body == "lambertian" else body_mode
+    c, law, body_mode, law_report = body_term(body, m.values[used], m.wi[used], m.wr[used], C)
 
     def shape(theta_i, theta_r):  # g(μ_i) g(μ_r) of the body (1: Lambertian)
-        theta_i = np.asarray(theta_i, float)
-        return np.ones_like(theta_i) if law is None else law(np.cos(theta_i), np.cos(theta_r))
+        return body_factor(law, np.cos(theta_i), np.cos(theta_r))
 
     def weight(theta_i, theta_r):
         if normalisation == "none":

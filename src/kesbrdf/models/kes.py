@@ -55,7 +55,7 @@ from kesbrdf.models import interpolation as kes
 from kesbrdf._version import __version__
 from kesbrdf.errors import KESError, KesbrdfError, MeasurementError, ModelError, where
 from kesbrdf.models.base import ReflectanceModel, register, check_fit_options
-from kesbrdf.models.body import BodyLaw, body_value, fit_body_law
+from kesbrdf.models.body import BodyLaw, body_term, line_body_factor
 from kesbrdf.models.kes_sigma import KES_SIGMA_SCALES, StoredSigma, check_summary, kes_coordinates, sigma_summary
 from kesbrdf.models.mappings import (
     EXTRAPOLATIONS,
@@ -252,11 +252,7 @@ class Model(StoredSigma, ReflectanceModel):
     def line_body_shape(self, gamma) -> np.ndarray:
         """g(cos θ_i) g(cos θ_r) of the body on the table's incidence line at deviation |γ|
         (θ_{i,r} = (S ∓ |γ|)/2); 1 for a Lambertian body."""
-        gamma = np.abs(np.asarray(gamma, float))
-        if self.body_law is None:
-            return np.ones_like(gamma)
-        S = self.line_sum
-        return self.body_law(np.cos((S - gamma) / 2.0), np.cos((S + gamma) / 2.0))
+        return line_body_factor(self.body_law, gamma, self.line_sum)
 
     def lookup_unit(self, phi, gamma) -> np.ndarray:
         """Bilinear lookup for φ ∈ [0, 2π], γ ≥ 0 (finite), shape (n, C) (:func:`kesbrdf.models.table.lookup_unit`)."""
@@ -364,11 +360,8 @@ class Model(StoredSigma, ReflectanceModel):
         sigma = None
         if fields.get("sigma") is not None:  # absent in files written before it: no σ
             sigma = check_summary(fields["sigma"], source)
-        law = None
-        if fields.get("body_law") is not None:  # absent in files written before it: Lambertian
-            law = BodyLaw.from_dict(fields["body_law"], source)
-            law = None if law.lambertian else law
-        return cls(**shared, **arr, sigma=sigma, body_law=law)
+        # absent in files written before it: Lambertian
+        return cls(**shared, **arr, sigma=sigma, body_law=BodyLaw.from_fields(fields, source))
 
     # -- fitting (kinds contract) ----------------------------------------------
     @classmethod
@@ -583,23 +576,12 @@ def fit(
 
     # 2. body term: the shared rule (kesbrdf.models.body): a Fresnel-like c g(μ_i) g(μ_r)
     #    when the samples show one (eq. B3-B5, body="auto"), else at most the darkest reading (B1)
-    law, law_report = None, None
-    if isinstance(body, str) and body == "auto":
-        c, law, law_report = fit_body_law(values_used, m.wi[used], m.wr[used])
-        body_mode = "auto"
-    elif isinstance(body, str) and body == "lambertian":
-        c, body_mode = body_value("auto", values_used, C)
-        body_mode = "lambertian"
-    else:
-        c, body_mode = body_value(body, values_used, C)
+    c, law, body_mode, law_report = body_term(body, values_used, m.wi[used], m.wr[used], C)
 
     # 3. q = f·√(cos θ_i cos θ_r) of every half-sample (body included: KES works on
     #    the measured quantity, as in the paper), floored at the noise level
     gamma_nodes = _merge_close(np.concatenate([curves[s][0] for s in curves]))
     slots = kes.half_slots(orientations)
-    def body_line(g):  # g(μ_i) g(μ_r) of the body on the line at |γ| (1: Lambertian)
-        return np.ones_like(g) if law is None else law(np.cos((line_sum - g) / 2.0), np.cos((line_sum + g) / 2.0))
-
     q_half_nodes = np.full((gamma_nodes.size, 8, C), np.nan)
     for slot in slots:
         g, f = curves[slot]
@@ -636,13 +618,13 @@ def fit(
     # 5. interpolate over φ at every γ, then split off the body: lobe = q − c·w(γ)
     phi_grid = np.arange(n_phi) * (2 * np.pi / n_phi)
     table, fallback_gamma = fill_table(q_half, phi_grid, gamma_grid, orientations, interpolation, fallback)
-    body_q = c[None, None, :] * (line_weight(gamma_grid, line_sum, normalisation) * body_line(gamma_grid))[None, :, None]
+    body_q = c[None, None, :] * (line_weight(gamma_grid, line_sum, normalisation) * line_body_factor(law, gamma_grid, line_sum))[None, :, None]
     lobe = table - body_q
     clamped = int(np.count_nonzero(lobe < -1e-12 * np.abs(table)))
     table = np.maximum(lobe, 0.0)
     q_total_nodes = q_half_nodes
     q_half_nodes = q_half_nodes - c[None, None, :] * (line_weight(gamma_nodes, line_sum, normalisation)
-                                                      * body_line(gamma_nodes))[:, None, None]
+                                                      * line_body_factor(law, gamma_nodes, line_sum))[:, None, None]
 
     fallback_deg = [round(float(np.degrees(gamma_grid[i])), 6) for i in fallback_gamma]
     diagnostics = {

@@ -387,12 +387,8 @@ class KesBSDF(FabricBSDF):
         above = (cos_i > 0.0) & (cos_r > 0.0) & active
         phi, gamma = self._phi_gamma(wi, wr)
         q = self.lobe_q(phi, gamma)
-        f = self.body * self.body_shape(cos_i, cos_r) + q / foreshortening(cos_i, cos_r, self.normalisation)
+        f = self.body * body_shape(self.body_law, cos_i, cos_r) + q / foreshortening(cos_i, cos_r, self.normalisation)
         return dr.select(above, f, 0.0)
-
-    def body_shape(self, cos_i, cos_r):
-        """g(cos θ_i) g(cos θ_r) of eq. (B3) (1 for a Lambertian body)."""
-        return body_shape(self.body_law, cos_i, cos_r)
 
     def to_string(self):
         return (
